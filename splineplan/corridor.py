@@ -1,0 +1,266 @@
+"""Corridor: a stretch of drivable road with a reference line and a Frenet frame.
+
+A point of the corridor is (s, l): station s [m] along the reference line and lateral
+offset l [m], positive to the left of the direction of travel. The drivable area at
+station s is ``right(s) <= l <= left(s)``. No SUMO here: the SUMO adapter
+(:mod:`splineplan.network`) builds corridors from routes with :meth:`Corridor.from_reference`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike
+from scipy.spatial import cKDTree
+
+from splineplan.errors import GeometryError
+from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations, resample_polyline
+
+#: Spacing [m] at which reference lines are resampled.
+REFERENCE_SPACING = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class Corridor:
+    """Drivable road stretch in a Frenet frame.
+
+    Attributes
+    ----------
+    reference
+        Reference line ``(n, 2)`` [m], resampled evenly.
+    s
+        Station of each reference vertex ``(n,)`` [m], from 0.
+    left, right
+        Lateral offsets ``(n,)`` [m] of the left and right road boundary at each station
+        (``right < left``; usually ``right < 0 < left``).
+    edges
+        SUMO edge ids along the corridor, in order (empty where unknown).
+    edge_starts
+        Station ``(len(edges),)`` [m] at which each edge begins.
+    offset
+        Station [m] of this corridor's start on the whole route, for messages.
+    """
+
+    reference: FloatArray
+    s: FloatArray
+    left: FloatArray
+    right: FloatArray
+    edges: tuple[str, ...] = ()
+    edge_starts: FloatArray = field(default_factory=lambda: np.zeros(0))
+    offset: float = 0.0
+    _tree: cKDTree = field(init=False, repr=False)
+    _heading: FloatArray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        if len(self.reference) < 2 or self.s[-1] <= 0:
+            raise GeometryError("corridor needs a reference line of positive length")
+        if np.any(self.left <= self.right):
+            i = int(np.argmax(self.left <= self.right))
+            raise GeometryError(
+                f"corridor has no width at station {self.offset + self.s[i]:.1f} m"
+            )
+        if len(self.edges) != len(self.edge_starts):
+            raise GeometryError("corridor needs one start station per edge")
+        for name in ("reference", "s", "left", "right", "edge_starts"):
+            getattr(self, name).setflags(write=False)
+        d = np.diff(self.reference, axis=0)
+        object.__setattr__(self, "_heading", np.arctan2(d[:, 1], d[:, 0]))
+        object.__setattr__(self, "_tree", cKDTree(self.reference))
+
+    # -- construction -------------------------------------------------------------------
+    @classmethod
+    def from_boundaries(
+        cls,
+        left: ArrayLike,
+        right: ArrayLike,
+        *,
+        edges: tuple[str, ...] = (),
+        edge_starts: ArrayLike = (),
+        offset: float = 0.0,
+    ) -> Corridor:
+        """Corridor between a left and a right boundary polyline, each ``(n, 2)`` [m].
+
+        Both run in the direction of travel. The reference line is their midline.
+        """
+        lb = _as_polyline(left, "left boundary")
+        rb = _as_polyline(right, "right boundary")
+        n = max(len(resample_polyline(lb, REFERENCE_SPACING)),
+                len(resample_polyline(rb, REFERENCE_SPACING)))
+        lr = _resample_n(lb, n)
+        rr = _resample_n(rb, n)
+        mid = resample_polyline((lr + rr) / 2.0, REFERENCE_SPACING)
+        ref_s = polyline_stations(mid)
+        probe = cls(mid, ref_s, np.full(len(mid), 1e9), np.full(len(mid), -1e9))
+        left_off = probe._offsets_of(resample_polyline(lb, REFERENCE_SPACING / 2))
+        right_off = probe._offsets_of(resample_polyline(rb, REFERENCE_SPACING / 2))
+        return cls(mid, ref_s, left_off, right_off, tuple(edges),
+                   np.asarray(edge_starts, dtype=float).reshape(-1), offset)
+
+    @classmethod
+    def from_reference(
+        cls,
+        reference: ArrayLike,
+        left: ArrayLike,
+        right: ArrayLike,
+        *,
+        edges: tuple[str, ...] = (),
+        edge_starts: ArrayLike = (),
+        offset: float = 0.0,
+    ) -> Corridor:
+        """Corridor from a reference polyline ``(n, 2)`` and boundary offsets ``(n,)`` [m].
+
+        ``left`` and ``right`` are the lateral offsets of the boundaries at the reference's
+        vertices; they are interpolated when the line is resampled.
+        """
+        ref = np.asarray(reference, dtype=float)
+        lo, ro = np.asarray(left, dtype=float), np.asarray(right, dtype=float)
+        if ref.ndim != 2 or ref.shape[1] != 2 or lo.shape != (len(ref),) or ro.shape != lo.shape:
+            raise GeometryError("reference must be (n, 2) and offsets (n,)")
+        keep = np.concatenate(([True], np.hypot(*np.diff(ref, axis=0).T) > 1e-9))
+        ref, lo, ro = ref[keep], lo[keep], ro[keep]
+        s0 = polyline_stations(ref)
+        mid = resample_polyline(ref, REFERENCE_SPACING)
+        s = polyline_stations(mid)
+        return cls(mid, s, np.interp(s, s0, lo), np.interp(s, s0, ro), tuple(edges),
+                   np.asarray(edge_starts, dtype=float).reshape(-1), offset)
+
+    # -- queries ------------------------------------------------------------------------
+    @property
+    def length(self) -> float:
+        """Length [m] of the reference line."""
+        return float(self.s[-1])
+
+    def bounds_at(self, s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Right and left boundary offsets [m] at stations ``s``."""
+        s = np.asarray(s, dtype=float)
+        return np.interp(s, self.s, self.right), np.interp(s, self.s, self.left)
+
+    def heading_at(self, s: ArrayLike) -> FloatArray:
+        """Heading [rad] of the reference line at stations ``s``."""
+        i = self._segment_index(np.asarray(s, dtype=float))
+        return self._heading[i]
+
+    def to_xy(self, s: ArrayLike, l: ArrayLike) -> FloatArray:  # noqa: E741
+        """Points ``(n, 2)`` [m] at stations ``s`` and lateral offsets ``l``."""
+        s_arr, l_arr = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(l, dtype=float))
+        i = self._segment_index(s_arr)
+        h = self._heading[i]
+        t = s_arr - self.s[i]
+        base = self.reference[i]
+        x = base[..., 0] + t * np.cos(h) - l_arr * np.sin(h)
+        y = base[..., 1] + t * np.sin(h) + l_arr * np.cos(h)
+        return np.stack((x, y), axis=-1)
+
+    def to_sl(self, xy: ArrayLike) -> FloatArray:
+        """Stations and lateral offsets ``(n, 2)`` of points ``(n, 2)`` [m].
+
+        Projects each point onto the nearest segment of the reference line; points beyond
+        the ends are extrapolated along the end segments.
+        """
+        pts = np.atleast_2d(np.asarray(xy, dtype=float))
+        _, k = self._tree.query(pts)
+        nseg = len(self.reference) - 1
+        best_s = np.empty(len(pts))
+        best_l = np.empty(len(pts))
+        best_d = np.full(len(pts), np.inf)
+        for cand in (k - 1, k):
+            i = np.clip(cand, 0, nseg - 1)
+            h = self._heading[i]
+            dx = pts[:, 0] - self.reference[i, 0]
+            dy = pts[:, 1] - self.reference[i, 1]
+            along = dx * np.cos(h) + dy * np.sin(h)
+            lat = -dx * np.sin(h) + dy * np.cos(h)
+            seg_len = self.s[i + 1] - self.s[i]
+            lo = np.where(i == 0, -np.inf, 0.0)
+            hi = np.where(i == nseg - 1, np.inf, seg_len)
+            t = np.clip(along, lo, hi)
+            dist = np.hypot(along - t, lat)
+            better = dist < best_d
+            best_d = np.where(better, dist, best_d)
+            best_s = np.where(better, self.s[i] + along, best_s)
+            best_l = np.where(better, lat, best_l)
+        return np.column_stack((best_s, best_l))
+
+    def contains(self, xy: ArrayLike, margin: float = 0.0) -> np.ndarray:
+        """Whether points ``(n, 2)`` lie on the road, at least ``margin`` [m] inside."""
+        sl = self.to_sl(xy)
+        r, lft = self.bounds_at(sl[:, 0])
+        inside = (sl[:, 0] >= 0) & (sl[:, 0] <= self.length)
+        return np.asarray(inside & (sl[:, 1] >= r + margin) & (sl[:, 1] <= lft - margin))
+
+    def left_xy(self) -> FloatArray:
+        """Left boundary polyline ``(n, 2)`` [m]."""
+        return self.to_xy(self.s, self.left)
+
+    def right_xy(self) -> FloatArray:
+        """Right boundary polyline ``(n, 2)`` [m]."""
+        return self.to_xy(self.s, self.right)
+
+    def polygon(self) -> FloatArray:
+        """Outline of the drivable area ``(k, 2)`` [m], counter-clockwise, not closed."""
+        return np.concatenate((self.right_xy(), self.left_xy()[::-1]))
+
+    def edge_at(self, s: float) -> str | None:
+        """Id of the SUMO edge at station ``s`` [m] of this corridor, if known."""
+        if not self.edges:
+            return None
+        i = int(np.searchsorted(self.edge_starts, s, side="right")) - 1
+        return self.edges[max(i, 0)]
+
+    def slice(self, s0: float, s1: float) -> Corridor:
+        """Sub-corridor between stations ``s0`` and ``s1`` [m], stations restarting at 0."""
+        s0, s1 = max(0.0, float(s0)), min(self.length, float(s1))
+        if s1 - s0 <= 1e-6:
+            raise GeometryError(f"empty corridor slice [{s0:.1f}, {s1:.1f}] m")
+        inner = (self.s > s0) & (self.s < s1)
+        ss = np.concatenate(([s0], self.s[inner], [s1]))
+        ref = self.to_xy(ss, np.zeros_like(ss))
+        r, lft = self.bounds_at(ss)
+        keep = self.edge_starts < s1
+        starts = np.maximum(self.edge_starts[keep] - s0, 0.0)
+        edges = tuple(e for e, k in zip(self.edges, keep, strict=True) if k)
+        if len(starts) > 1:  # drop edges that ended before s0
+            last_before = np.searchsorted(starts, 0.0, side="right") - 1
+            starts, edges = starts[last_before:], edges[last_before:]
+        return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0)
+
+    def segments(self, length: float, overlap: float = 0.0) -> list[Corridor]:
+        """The corridor cut into pieces of at most ``length`` [m] (the last may be shorter).
+
+        Consecutive pieces share ``overlap`` [m].
+        """
+        if length <= overlap:
+            raise GeometryError("segment length must exceed the overlap")
+        n = max(1, int(np.ceil((self.length - overlap) / (length - overlap) - 1e-9)))
+        step = (self.length - overlap) / n if n > 1 else self.length
+        return [self.slice(i * step, min(i * step + step + overlap, self.length))
+                for i in range(n)]
+
+    # -- helpers ------------------------------------------------------------------------
+    def _segment_index(self, s: np.ndarray) -> np.ndarray:
+        i = np.searchsorted(self.s, s, side="right") - 1
+        return np.clip(i, 0, len(self.s) - 2)
+
+    def _offsets_of(self, boundary: FloatArray) -> FloatArray:
+        sl = self.to_sl(boundary)
+        order = np.argsort(sl[:, 0], kind="stable")
+        return np.interp(self.s, sl[order, 0], sl[order, 1])
+
+
+def _as_polyline(points: ArrayLike, what: str) -> FloatArray:
+    arr = np.asarray(points, dtype=float)
+    if arr.ndim != 2 or arr.shape[1] != 2 or len(arr) < 2:
+        raise GeometryError(f"{what} must be an (n, 2) array with n >= 2, got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise GeometryError(f"{what} has non-finite coordinates")
+    arr = dedupe_polyline(arr)
+    if len(arr) < 2:
+        raise GeometryError(f"{what} has zero length")
+    return arr
+
+
+def _resample_n(points: FloatArray, n: int) -> FloatArray:
+    s = polyline_stations(points)
+    t = np.linspace(0.0, s[-1], n)
+    return np.column_stack((np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])))

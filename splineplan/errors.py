@@ -1,0 +1,67 @@
+"""Errors of the package: one base class, one subclass per failure.
+
+Every message names what failed and where (file, edge id, station in metres), so that
+the command-line tool can print it as one line.
+"""
+
+from __future__ import annotations
+
+
+class SplineplanError(Exception):
+    """Base class of every error raised by splineplan."""
+
+
+class ParameterError(SplineplanError, ValueError):
+    """A parameter is out of its physical or allowed range."""
+
+
+class NetworkError(SplineplanError):
+    """A network file is missing, unreadable or not a SUMO network."""
+
+
+class UnknownEdgeError(SplineplanError, KeyError):
+    """An edge id is not in the network."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
+
+
+class VehicleClassError(SplineplanError):
+    """The vehicle class is unknown or may not use the edges asked for."""
+
+
+class NoRouteError(SplineplanError):
+    """No road route leads from the origin to the destination."""
+
+
+class GeometryError(SplineplanError):
+    """Geometry is malformed: a degenerate corridor, a bad polygon, a pose off the road."""
+
+
+class RoadBlockedError(SplineplanError):
+    """Level 2 found no passage through a road segment.
+
+    Attributes
+    ----------
+    station
+        Distance [m] from the segment's start of the first sweep line that no path reaches.
+    edge
+        Id of the SUMO edge at that station, where the corridor knows it (else ``None``).
+    """
+
+    def __init__(self, message: str, *, station: float, edge: str | None = None) -> None:
+        super().__init__(message)
+        self.station = station
+        self.edge = edge
+
+
+class TrajectoryError(SplineplanError):
+    """Level 3 could not build a trajectory (too few points, infeasible start)."""
+
+
+class ScenarioError(SplineplanError):
+    """A scenario file is malformed: unknown key, missing file, bad value."""
+
+
+class SimulationError(SplineplanError):
+    """SUMO failed to start, or the simulation could not go on."""
