@@ -11,6 +11,7 @@ import argparse
 import logging
 import sys
 from collections.abc import Callable, Sequence
+from typing import NoReturn
 
 from splineplan import __version__
 from splineplan.errors import SplineplanError
@@ -20,19 +21,312 @@ Command = Callable[[argparse.Namespace], int]
 
 # ---- commands (one _add_/_cmd_ pair each; keep them in this order) ----------------------
 
+def _add_route(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("route", help="plan a road-level route (level 1) on a SUMO network",
+                       description="Shortest road route between two SUMO edges (Dijkstra "
+                                   "over the network's allowed connections).")
+    p.add_argument("net", metavar="NET", help="SUMO network (.net.xml or .net.xml.gz)")
+    p.add_argument("from_edge", metavar="FROM_EDGE", help="origin edge id")
+    p.add_argument("to_edge", metavar="TO_EDGE", help="destination edge id")
+    p.add_argument("--vclass", default="passenger", help="SUMO vehicle class (passenger)")
+    p.add_argument("--weight", choices=("length", "time"), default="length",
+                   help="minimise length [m] or travel time [s] (length)")
+    p.add_argument("--avoid", nargs="+", default=[], metavar="EDGE",
+                   help="edges the route must not use")
+    p.add_argument("--start-pos", type=float, default=0.0, metavar="M",
+                   help="start position [m] along FROM_EDGE (0)")
+    p.add_argument("--plot", metavar="PNG", help="write a picture of the route on the network")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=_cmd_route)
+
+
+def _cmd_route(args: argparse.Namespace) -> int:
+    import json
+
+    from splineplan.network import load_network
+    from splineplan.route import shortest_route
+
+    net = load_network(args.net)
+    route = shortest_route(net, args.from_edge, args.to_edge, vclass=args.vclass,
+                           weight=args.weight, avoid=tuple(args.avoid),
+                           start_pos=args.start_pos)
+    if args.plot:
+        from splineplan.plot import plot_route
+
+        plot_route(net, route, path=args.plot)
+    unit = "m" if route.weight == "length" else "s"
+    if args.json:
+        print(json.dumps({
+            "network": str(args.net), "from": route.edges[0], "to": route.edges[-1],
+            "vclass": route.vclass, "weight": route.weight, "avoid": list(args.avoid),
+            "start_pos": route.start_pos, "edges": list(route.edges),
+            "length": route.length, "cost": route.cost, "plot": args.plot,
+        }, indent=2))
+    else:
+        print(f"route {route.edges[0]} -> {route.edges[-1]} ({route.vclass}, by {route.weight})")
+        print(f"edges ({len(route.edges)}): {' '.join(route.edges)}")
+        print(f"length: {route.length:.2f} m")
+        print(f"cost: {route.cost:.2f} {unit}")
+        if args.plot:
+            print(f"picture: {args.plot}")
+    return 0
+
+def _xy_pair(text: str) -> tuple[float, float]:
+    """``"X,Y"`` [m] as two floats (an argparse type)."""
+    try:
+        x, y = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected X,Y in metres, got {text!r}") from None
+    return x, y
+
+
+def _add_plan_image(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plan-image", help="plan levels 2 and 3 across a road drawn as an image",
+        description="Read a road segment drawn as an image (light = road, dark = obstacle or "
+                    "off-road; x to the right and y up from the bottom-left corner, in metres), "
+                    "plan the roadmap and the trajectory from the left edge to the right edge, "
+                    "and write trajectory.csv (t, x, y, heading, speed, curvature, s), "
+                    "plan.json and pictures to the output folder.")
+    p.add_argument("map", metavar="MAP", help="map image (PNG or any format Pillow reads)")
+    p.add_argument("--scale", type=float, required=True, metavar="M",
+                   help="size of a pixel [m] (metres per pixel)")
+    p.add_argument("--start", type=_xy_pair, metavar="X,Y",
+                   help="start [m] (default: the middle of the road on the left edge)")
+    p.add_argument("--goal", type=_xy_pair, metavar="X,Y",
+                   help="goal [m]: the plan ends on the sweep line through it "
+                        "(default: the right edge)")
+    p.add_argument("--out", metavar="DIR", help="output folder (default: MAP's name + '_plan')")
+    p.add_argument("--threshold", type=float, default=0.5,
+                   help="luminance in (0, 1) from which a pixel is road (0.5)")
+    p.add_argument("--merge-tolerance", type=int, default=0, metavar="PIXELS",
+                   help="merge obstacle rows whose ends differ by at most this many pixels "
+                        "(fewer, slightly larger obstacles; 0 = pixel-exact)")
+    p.add_argument("--no-plot", action="store_true", help="write no pictures")
+    p.set_defaults(func=_cmd_plan_image)
+
+
+
+def _cmd_plan_image(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from splineplan.image_map import image_map, plan_image
+    from splineplan.io import save_plan
+    from splineplan.trajectory import TrajectoryParams
+
+    amap = image_map(args.map, scale=args.scale, threshold=args.threshold,
+                     merge_tolerance=args.merge_tolerance)
+    params = TrajectoryParams()
+    plan = plan_image(amap, start=args.start, goal=args.goal, params=params)
+    out = Path(args.out) if args.out else Path(f"{Path(args.map).stem}_plan")
+    tr = plan.trajectory
+    save_plan(out, corridor=plan.corridor, obstacles=amap.obstacles, roadmaps=plan.roadmaps,
+              trajectory=tr, trajectory_params=params,
+              meta={"source": "image", "map": str(Path(args.map).resolve()),
+                    "scale": amap.scale, "threshold": args.threshold,
+                    "start": plan.start, "goal": plan.goal})
+    if not args.no_plot:
+        _plot_plan_folder(out, out)
+    h, w = amap.shape
+    print(f"map {args.map}: {w} x {h} pixels, {w * amap.scale:.1f} x {h * amap.scale:.1f} m, "
+          f"{amap.n_blobs} obstacles ({len(amap.obstacles)} rectangles)")
+    print(f"trajectory: {tr.length:.1f} m in {tr.duration:.1f} s, "
+          f"min clearance {tr.min_clearance:.2f} m, feasible: {'yes' if tr.feasible else 'no'}")
+    print(f"written to {out}/ (trajectory.csv, plan.json"
+          f"{'' if args.no_plot else ', roadmap.png, trajectory.png, speed.png'})")
+    if not tr.feasible:
+        import numpy as np
+
+        kappa = float(np.max(np.abs(tr.curvature)))
+        why = (f"min clearance {tr.min_clearance:.2f} m is below the margin "
+               f"{tr.safety_margin:.2f} m" if tr.min_clearance < tr.safety_margin else
+               f"curvature up to {kappa:.3f} 1/m exceeds the limit {params.kappa_max:.3f} 1/m")
+        print(f"splineplan plan-image: warning: the trajectory is not feasible: {why}",
+              file=sys.stderr)
+    return 0
+
+
+def _plot_plan_folder(run_dir: object, out: object, fmt: str = "png") -> list[str]:
+    """Draw Fig. 2, Fig. 4 and the speed profile of a plan folder; returns the files."""
+    from pathlib import Path
+
+    from splineplan.io import load_plan
+    from splineplan.plot import plot_roadmap, plot_speed_profile, plot_trajectory
+    from splineplan.trajectory import TrajectoryParams
+
+    saved = load_plan(Path(str(run_dir)))
+    dest = Path(str(out))
+    written = []
+    if saved.roadmaps:
+        p = dest / f"roadmap.{fmt}"
+        plot_roadmap(saved.roadmaps, saved.corridor, saved.obstacles, path=p)
+        written.append(str(p))
+    if saved.trajectory is not None:
+        p = dest / f"trajectory.{fmt}"
+        plot_trajectory(saved.trajectory, saved.corridor, saved.obstacles,
+                        saved.roadmaps or None, path=p, footprint_every=10.0)
+        written.append(str(p))
+        p = dest / f"speed.{fmt}"
+        plot_speed_profile(saved.trajectory, saved.trajectory_params or TrajectoryParams(),
+                           path=p)
+        written.append(str(p))
+    return written
+
+
+def _add_plot(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plot", help="draw the figures of a plan or simulation folder",
+        description="Redraw the paper's figures from a run folder: with plan.json (written by "
+                    "plan-image), the roadmap (Fig. 2), the trajectory coloured by speed "
+                    "(Fig. 4) and the speed profile; with metrics.json (a simulation run), "
+                    "the route on the network (Fig. 3) and the driven path coloured by speed.")
+    p.add_argument("run_dir", metavar="RUN_DIR", help="folder holding plan.json or metrics.json")
+    p.add_argument("--out", metavar="DIR", help="where to write the pictures (RUN_DIR)")
+    p.add_argument("--format", default="png", choices=("png", "pdf", "svg"),
+                   help="picture format (png)")
+    p.set_defaults(func=_cmd_plot)
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from splineplan.errors import ScenarioError
+
+    run = Path(args.run_dir)
+    out = Path(args.out) if args.out else run
+    if (run / "plan.json").exists():
+        written = _plot_plan_folder(run, out, args.format)
+    elif (run / "metrics.json").exists():
+        from splineplan.plot import plot_run_folder
+
+        written = plot_run_folder(run, out_dir=out, fmt=args.format)
+    else:
+        raise ScenarioError(f"{run} holds neither plan.json nor metrics.json")
+    for f in written:
+        print(f)
+    return 0
+
+def _add_simulate(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "simulate", help="drive an ego vehicle with the planner through a SUMO scenario",
+        description="Run a scenario (TOML, see scenarios/) in SUMO with the planner driving "
+                    "the ego vehicle; write metrics.json, trajectory.csv and fcd.xml.")
+    p.add_argument("scenario", help="scenario file (.toml)")
+    p.add_argument("--out", default=None,
+                   help="output folder (default: runs/<scenario name>)")
+    p.add_argument("--plot", action="store_true", help="also draw the route and each plan")
+    p.add_argument("--gui", action="store_true", help="watch in sumo-gui (through traci)")
+    p.add_argument("--seed", type=int, default=None, help="SUMO's random seed")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_simulate)
+
+
+def _cmd_simulate(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from splineplan.scenario import load_scenario
+    from splineplan.sim import simulate
+
+    scenario = load_scenario(args.scenario)
+    out = Path(args.out) if args.out else Path("runs") / scenario.name
+    result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
+                      progress=False if args.no_progress else None)
+    m = result.metrics
+    print(f"{scenario.name}: {result.status}: {result.reason}")
+    print(f"  travel time {m['travel_time'] or 0:.1f} s, distance {m['distance']:.1f} m, "
+          f"collisions {m['collisions']}, off road {m['time_off_road']:.1f} s, "
+          f"replans {m['replan_count']}")
+    print(f"  outputs in {out}")
+    return 0 if result.arrived else 1
+
+
+def _add_plan(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "plan", help="plan levels 1-3 on a SUMO network and write the trajectory",
+        description="Plan the route (level 1), the roadmaps (level 2) and the trajectory "
+                    "(level 3) from the start of FROM_EDGE to the end of TO_EDGE; write "
+                    "trajectory.csv and plan.json into --out, and a picture with --plot.")
+    p.add_argument("net", metavar="NET", help="SUMO network (.net.xml or .net.xml.gz)")
+    p.add_argument("from_edge", metavar="FROM_EDGE")
+    p.add_argument("to_edge", metavar="TO_EDGE")
+    p.add_argument("--obstacles", metavar="FILE",
+                   help="SUMO additional/route file: <poly> shapes and vehicles with a <stop>")
+    p.add_argument("--out", metavar="DIR", default="plan", help="output folder (plan)")
+    p.add_argument("--plot", metavar="PNG", help="picture of road, obstacles, roadmap and curve")
+    p.add_argument("--vclass", default="passenger", help="SUMO vehicle class (passenger)")
+    p.add_argument("--weight", choices=("length", "time"), default="length")
+    p.add_argument("--avoid", nargs="+", default=[], metavar="EDGE", help="edges not to use")
+    p.add_argument("--start-pos", type=float, default=0.0, metavar="M",
+                   help="start position [m] along FROM_EDGE")
+    p.add_argument("--s-max", type=float, default=None, metavar="M/S", help="maximum speed")
+    p.add_argument("--d", type=float, default=None, metavar="M", help="sweep-line spacing")
+    p.set_defaults(func=_cmd_plan)
+
+
+def _cmd_plan(args: argparse.Namespace) -> int:
+    from dataclasses import replace
+    from pathlib import Path
+
+    from splineplan.io import save_plan
+    from splineplan.network import load_network, read_obstacles
+    from splineplan.pipeline import plan
+    from splineplan.roadmap import RoadmapParams
+    from splineplan.trajectory import TrajectoryParams
+
+    net = load_network(args.net)
+    obstacles = read_obstacles(net, args.obstacles) if args.obstacles else None
+    rp = RoadmapParams() if args.d is None else RoadmapParams(d=args.d)
+    tp = TrajectoryParams()
+    if args.s_max is not None:
+        tp = replace(tp, s_max=args.s_max)
+    result = plan(net, args.from_edge, args.to_edge, obstacles, start_pos=args.start_pos,
+                  vclass=args.vclass, weight=args.weight, avoid=args.avoid,
+                  roadmap_params=rp, trajectory_params=tp)
+    out = Path(args.out)
+    tr = result.trajectory
+    save_plan(out, corridor=result.corridor, obstacles=obstacles, roadmaps=list(result.roadmaps),
+              trajectory=tr, trajectory_params=tp,
+              meta={"source": "network", "network": str(Path(args.net).resolve()),
+                    "route": list(result.route.edges), "blocked": list(result.blocked)})
+    if args.plot:
+        from splineplan.plot import plot_trajectory
+
+        plot_trajectory(tr, result.corridor, obstacles, list(result.roadmaps), path=args.plot)
+    print(f"route: {' '.join(result.route.edges)} ({result.route.length:.1f} m)")
+    if result.blocked:
+        print(f"closed and avoided: {' '.join(result.blocked)}")
+    print(f"trajectory: {tr.length:.1f} m in {tr.duration:.1f} s, "
+          f"min clearance {tr.min_clearance:.2f} m, feasible: {'yes' if tr.feasible else 'no'}")
+    print(f"time: level 1 {1e3 * result.route_seconds:.1f} ms, level 2 "
+          f"{1e3 * result.roadmap_seconds:.1f} ms, level 3 "
+          f"{1e3 * result.trajectory_seconds:.1f} ms")
+    print(f"written to {out}/ (trajectory.csv, plan.json)"
+          + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
 # ---- end of commands --------------------------------------------------------------------
+
+
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line (argparse would print the usage too)."""
+
+    def error(self, message: str) -> NoReturn:
+        print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(2)
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of every command."""
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="splineplan",
         description="Spline-based multi-level planning for autonomous vehicles in SUMO.",
     )
     parser.add_argument("--version", action="version", version=f"splineplan {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0,
                         help="log more (-v info, -vv debug)")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                parser_class=_Parser)
     for name, add in sorted(_registry().items()):
         add(sub)
         del name

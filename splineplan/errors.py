@@ -44,7 +44,8 @@ class RoadBlockedError(SplineplanError):
     Attributes
     ----------
     station
-        Distance [m] from the segment's start of the first sweep line that no path reaches.
+        Station [m] on the whole route (the segment's ``offset`` added) of the first sweep
+        line that no path reaches.
     edge
         Id of the SUMO edge at that station, where the corridor knows it (else ``None``).
     """

@@ -168,6 +168,29 @@ class Obstacles:
         hit = (b[:, 0] <= hi[0]) & (b[:, 2] >= lo[0]) & (b[:, 1] <= hi[1]) & (b[:, 3] >= lo[1])
         return self if hit.all() else self.subset(hit)
 
+    def elongated(self, directions: ArrayLike, extra: float) -> Obstacles:
+        """Each obstacle swept ``extra`` [m] both ways along its direction ``(k,)`` [rad].
+
+        The Minkowski sum with a segment of length ``2 extra`` centred on the origin: the
+        convex hull of the polygon shifted both ways (exact for convex polygons, larger
+        for others). Level 2 uses it to leave room for the corners of a rectangular
+        vehicle that it models as a disc.
+        """
+        from scipy.spatial import ConvexHull
+
+        head = np.broadcast_to(np.asarray(directions, dtype=float), (len(self),))
+        if not (np.isfinite(extra) and extra >= 0):
+            raise GeometryError(f"elongation must be >= 0, got {extra!r}")
+        if extra == 0 or len(self) == 0:
+            return self
+        rings = []
+        for i in range(len(self)):
+            shift = extra * np.array([np.cos(head[i]), np.sin(head[i])])
+            p = self.polygon(i)
+            pts = np.concatenate((p + shift, p - shift))
+            rings.append(pts[ConvexHull(pts).vertices])
+        return Obstacles.from_polygons(rings, self.ids)
+
     def distance(self, xy: ArrayLike) -> FloatArray:
         """Distance [m] from each point ``(n, 2)`` to the nearest obstacle, 0 inside."""
         pts = np.atleast_2d(np.asarray(xy, dtype=float))

@@ -6,15 +6,25 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import logging
+import math
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from splineplan.corridor import Corridor
-from splineplan.errors import ParameterError
-from splineplan.geometry import FloatArray
+from splineplan.corridor import REFERENCE_SPACING, Corridor
+from splineplan.errors import GeometryError, ParameterError, RoadBlockedError
+from splineplan.geometry import FloatArray, polygon_edges, wrap_angle
 from splineplan.obstacles import Obstacles
+
+logger = logging.getLogger(__name__)
+
+#: How far [m] the vehicle may stand outside the road and still get a roadmap.
+MAX_START_OFFROAD = 3.0
+#: Numerical slack [m] of the clearance checks (free-interval ends lie exactly at the
+#: inflation distance, so arcs leaving a zero-width vertex touch it).
+_EPS = 1e-7
 
 
 @dataclass(frozen=True)
@@ -43,6 +53,11 @@ class RoadmapParams:
     segment_length: float = 300.0
 
     def __post_init__(self) -> None:
+        for name in ("d", "wmax", "safety_margin", "vehicle_length", "vehicle_width",
+                     "segment_length"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
+                raise ParameterError(f"RoadmapParams.{name} must be a number, got {value!r}")
         for name in ("d", "wmax", "vehicle_length", "vehicle_width", "segment_length"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
@@ -81,7 +96,8 @@ class Roadmap:
         Length [m] of the chosen polyline.
     graph_xy, graph_s, graph_l, graph_width, graph_line
         The whole graph's vertices: points ``(V, 2)``, station, lateral offset, width and
-        the index of each vertex's sweep line ``(V,)``.
+        the index of each vertex's sweep line ``(V,)`` (line 0 is the source's; lines
+        behind the vehicle are not built).
     graph_lo, graph_hi
         Lateral bounds ``(V,)`` [m] of each vertex's free interval.
     arcs
@@ -92,6 +108,13 @@ class Roadmap:
         Where the vehicle was ``(2,)`` [m].
     params
         The parameters used.
+    arc_direct
+        ``(E,)``: whether the straight segment between the arc's two vertices keeps the
+        inflation distance from obstacles and road edges.
+    links
+        ``(m - 1, 2, 2)`` [m]: for each step of the chosen path, a free straight link
+        ``p -> q`` from the first vertex's sweep line to the next one's (see
+        :attr:`passage_xy`).
     """
 
     xy: FloatArray
@@ -112,6 +135,25 @@ class Roadmap:
     path: NDArray[np.int64]
     start_xy: FloatArray
     params: RoadmapParams
+    arc_direct: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    links: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+
+    @property
+    def passage_xy(self) -> FloatArray:
+        """A polyline ``(k, 2)`` [m] through the chosen vertices that keeps the inflation
+        distance from obstacles and road edges (configuration-space free).
+
+        From each vertex it runs along its sweep line (inside the free interval) to the
+        link's start, across to the link's end, and along the next line to the next
+        vertex. Where the straight segment between two vertices is free, that is all it
+        takes. Without links it is the vertices' polyline.
+        """
+        if len(self.links) != len(self.xy) - 1 or len(self.xy) < 2:
+            return self.xy
+        pts = np.concatenate((self.xy[:-1, None], self.links), axis=1).reshape(-1, 2)
+        pts = np.concatenate((pts, self.xy[-1:]))
+        keep = np.concatenate(([True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9))
+        return np.asarray(pts[keep])
 
     @property
     def bottleneck_s(self) -> float:
@@ -125,5 +167,572 @@ def plan_roadmap(
     start_xy: ArrayLike,
     params: RoadmapParams | None = None,
 ) -> Roadmap:
-    """Widest-then-shortest roadmap across a corridor among obstacles."""
-    raise NotImplementedError
+    """Widest-then-shortest roadmap across a corridor among obstacles.
+
+    Sweep lines stand at stations ``0, d, 2d, ...`` and at the corridor's end; each is the
+    straight segment along the reference line's normal between the road boundaries. Its
+    free intervals are the points at least ``params.inflation`` [m] from every obstacle and
+    from both road edges (lateral offset within ``[right + inflation, left - inflation]``).
+    A vertex stands at each interval's midpoint. An arc joins vertices ``a`` and ``b`` of
+    consecutive lines when the vehicle (a point in the grown configuration space) can pass
+    from ``a`` to ``b``: along ``a``'s line inside its free interval, across a straight
+    *link* to a point of ``b``'s interval, and along ``b``'s line. A link is free when it
+    keeps ``inflation`` from every obstacle (exact segment-to-polygon distance) and stays on
+    the shrunk road (exact on straight stretches; checked at points at most
+    ``REFERENCE_SPACING / 2`` apart where the road bends). The straight segment between
+    the midpoints is tried first (``Roadmap.arc_direct``); where it cuts a grown corner,
+    links at other places across the two intervals are tried, so that an obstacle just
+    ahead of a sweep line does not close an open road. ``Roadmap.passage_xy`` is the
+    chosen path with its links: a collision-free polyline.
+
+    The search maximises ``min(bottleneck width, wmax)``, then minimises length, exactly
+    (dynamic programming over the sweep lines, which form a layered acyclic graph).
+
+    Parameters
+    ----------
+    corridor
+        The road segment.
+    obstacles
+        Static obstacles (not yet grown).
+    start_xy
+        Vehicle position ``(2,)`` [m]. The path starts on the first sweep line at or ahead
+        of the vehicle's station, at the vertex nearest the vehicle.
+    params
+        Level-2 parameters; defaults to ``RoadmapParams()``.
+
+    Raises
+    ------
+    GeometryError
+        The start lies outside the corridor's station range, or more than
+        ``MAX_START_OFFROAD`` [m] off the road; or the inputs are malformed.
+    RoadBlockedError
+        No path of the graph reaches the last sweep line; ``station`` is the route
+        station (``corridor.offset`` added) of the first sweep line no path reaches.
+    """
+    params = RoadmapParams() if params is None else params
+    if not isinstance(params, RoadmapParams):
+        raise ParameterError(f"params must be RoadmapParams, not {type(params).__name__}")
+    if not isinstance(corridor, Corridor):
+        raise GeometryError(f"corridor must be a Corridor, not {type(corridor).__name__}")
+    if not isinstance(obstacles, Obstacles):
+        raise GeometryError(f"obstacles must be Obstacles, not {type(obstacles).__name__}")
+    start = np.asarray(start_xy, dtype=float).reshape(-1)
+    if start.shape != (2,) or not np.all(np.isfinite(start)):
+        raise GeometryError(f"start_xy must be two finite coordinates, got {start_xy!r}")
+    r = params.inflation
+    s0, l0 = (float(v) for v in corridor.to_sl(start[None])[0])
+    _check_start(corridor, s0, l0)
+
+    stations = _stations(corridor.length, params.d)
+    first = min(int(np.searchsorted(stations, s0 - 1e-9, side="left")), len(stations) - 1)
+    stations = stations[first:]
+    lines = _sweep_lines(corridor, stations, r)
+    iv_line, iv_lo, iv_hi = _free_intervals(lines, obstacles, r)
+    nline = len(stations)
+    mid = (iv_lo + iv_hi) / 2.0
+    width = iv_hi - iv_lo
+    vxy = lines.center[iv_line] + mid[:, None] * lines.normal[iv_line]
+    graph = _arcs(corridor, lines, iv_line, iv_lo, iv_hi, obstacles, r)
+    arcs, arc_len = graph.pairs, graph.length
+
+    on_first = np.flatnonzero(iv_line == 0)
+    if len(on_first) == 0:
+        _raise_blocked(corridor, stations, 0)
+    gap = np.maximum(np.maximum(iv_lo[on_first] - l0, l0 - iv_hi[on_first]), 0.0)
+    source = int(on_first[np.lexsort((np.abs(mid[on_first] - l0), gap))[0]])
+    path, steps, reached = _search(source, arcs, arc_len, width, iv_line, nline, params.wmax)
+    if path is None or steps is None:
+        _raise_blocked(corridor, stations, reached + 1)
+        raise AssertionError  # unreachable: _raise_blocked raises
+    pw = width[path]
+    k = int(np.argmin(pw))
+    seg = np.diff(vxy[path], axis=0)
+    out = Roadmap(
+        xy=vxy[path], s=stations[iv_line[path]], l=mid[path], width=pw,
+        bottleneck_width=float(pw[k]), bottleneck_index=k,
+        length=float(np.hypot(seg[:, 0], seg[:, 1]).sum()),
+        graph_xy=vxy, graph_s=stations[iv_line], graph_l=mid, graph_width=width,
+        graph_line=iv_line, graph_lo=iv_lo, graph_hi=iv_hi, arcs=arcs, path=path,
+        start_xy=start, params=params, arc_direct=graph.direct, links=graph.link[steps],
+    )
+    logger.debug("roadmap: %d lines, %d vertices, %d arcs, bottleneck %.2f m at s=%.1f m",
+                 nline, len(vxy), len(arcs), out.bottleneck_width, out.bottleneck_s)
+    return out
+
+
+# -- construction of the graph ---------------------------------------------------------
+@dataclass(frozen=True)
+class _Lines:
+    """Sweep lines: station ``(n,)`` [m], centre on the reference, unit tangent and normal
+    ``(n, 2)``, lateral range ``lo..hi`` ``(n,)`` [m] of the shrunk road, the inflation [m]."""
+
+    station: FloatArray
+    center: FloatArray
+    tangent: FloatArray
+    normal: FloatArray
+    lo: FloatArray
+    hi: FloatArray
+    inflation: float
+
+
+def _check_start(corridor: Corridor, s0: float, l0: float) -> None:
+    tol = 1e-6
+    if s0 < -tol or s0 > corridor.length + tol:
+        raise GeometryError(
+            f"start at station {corridor.offset + s0:.1f} m is outside the corridor "
+            f"[{corridor.offset:.1f}, {corridor.offset + corridor.length:.1f}] m"
+        )
+    right, left = (float(v) for v in corridor.bounds_at(s0))
+    off = max(right - l0, l0 - left)
+    if off > MAX_START_OFFROAD:
+        raise GeometryError(
+            f"start is {off:.1f} m off the road at station {corridor.offset + s0:.1f} m "
+            f"(at most {MAX_START_OFFROAD:.1f} m allowed)"
+        )
+
+
+def _stations(length: float, d: float) -> FloatArray:
+    n = math.floor(length / d + 1e-9)
+    s = np.arange(n + 1, dtype=float) * d
+    if length - s[-1] > 1e-6:
+        s = np.append(s, length)
+    else:
+        s[-1] = min(s[-1], length)
+    return np.asarray(s, dtype=float)
+
+
+def _sweep_lines(corridor: Corridor, stations: FloatArray, r: float) -> _Lines:
+    h = corridor.heading_at(stations)
+    tangent = np.column_stack((np.cos(h), np.sin(h)))
+    normal = np.column_stack((-tangent[:, 1], tangent[:, 0]))
+    center = corridor.to_xy(stations, np.zeros_like(stations))
+    right, left = corridor.bounds_at(stations)
+    return _Lines(stations, center, tangent, normal, right + r, left - r, r)
+
+
+def _cull(
+    seg_a: FloatArray, seg_b: FloatArray, bbox: FloatArray, r: float
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Pairs (segment, obstacle) whose bounding boxes come within ``r`` of each other.
+
+    Obstacles are sorted along the axis on which the segments spread most; each segment
+    tests only the obstacles whose extent on that axis can reach it.
+    """
+    lo = np.minimum(seg_a, seg_b) - r
+    hi = np.maximum(seg_a, seg_b) + r
+    if len(lo) == 0 or len(bbox) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    ax = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
+    order = np.argsort(bbox[:, ax], kind="stable")
+    bmin = bbox[order, ax]
+    reach = float(np.max(bbox[:, ax + 2] - bbox[:, ax]))
+    first = np.searchsorted(bmin, lo[:, ax] - reach, side="left")
+    last = np.searchsorted(bmin, hi[:, ax], side="right")
+    count = np.maximum(last - first, 0)
+    i = np.repeat(np.arange(len(lo)), count)
+    j = order[np.repeat(first, count) + np.arange(len(i))
+              - np.repeat(np.cumsum(count) - count, count)]
+    b = bbox[j]
+    hit = ((lo[i, 0] <= b[:, 2]) & (hi[i, 0] >= b[:, 0])
+           & (lo[i, 1] <= b[:, 3]) & (hi[i, 1] >= b[:, 1]))
+    i, j = i[hit], j[hit]
+    srt = np.lexsort((j, i))
+    return i[srt].astype(np.int64), j[srt].astype(np.int64)
+
+
+def _expand_edges(
+    group: NDArray[np.int64], obstacle: NDArray[np.int64], offsets: NDArray[np.int64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """For each (group, obstacle) pair, one row per obstacle edge: (group, edge index)."""
+    counts = offsets[obstacle + 1] - offsets[obstacle]
+    rep = np.repeat(np.arange(len(group)), counts)
+    first = np.repeat(np.cumsum(counts) - counts, counts)
+    edge = offsets[obstacle][rep] + (np.arange(len(rep)) - first)
+    return group[rep], edge
+
+
+def _slab(a: FloatArray, b: FloatArray, lo: FloatArray | float,
+          hi: FloatArray | float) -> tuple[FloatArray, FloatArray]:
+    """Solutions v of ``lo <= a + b v <= hi`` as intervals (empty: lower > upper)."""
+    flat = np.abs(b) < 1e-12
+    bb = np.where(flat, 1.0, b)
+    x1, x2 = (lo - a) / bb, (hi - a) / bb
+    inside = (a >= lo) & (a <= hi)
+    low = np.where(flat, np.where(inside, -np.inf, np.inf), np.minimum(x1, x2))
+    high = np.where(flat, np.where(inside, np.inf, -np.inf), np.maximum(x1, x2))
+    return low, high
+
+
+def _capsule_on_line(
+    ua: FloatArray, va: FloatArray, ub: FloatArray, vb: FloatArray, r: float
+) -> tuple[FloatArray, FloatArray]:
+    """Where the line ``u = 0`` comes within ``r`` of segments ``(ua, va) -> (ub, vb)``.
+
+    Returns ``v`` bounds of one closed interval per segment (lower > upper: no contact).
+    The capsule is convex, so its trace is the hull of the traces of its three parts.
+    """
+    lo = np.full(len(ua), np.inf)
+    hi = np.full(len(ua), -np.inf)
+    for u, v in ((ua, va), (ub, vb)):
+        h2 = r * r - u * u
+        ok = h2 >= 0
+        h = np.sqrt(np.where(ok, h2, 0.0))
+        lo = np.where(ok, np.minimum(lo, v - h), lo)
+        hi = np.where(ok, np.maximum(hi, v + h), hi)
+    du, dv = ub - ua, vb - va
+    ln = np.hypot(du, dv)
+    good = ln > 0
+    lns = np.where(good, ln, 1.0)
+    eu, ev = du / lns, dv / lns
+    l1, h1 = _slab(ua * ev - eu * va, eu, -r, r)  # distance across the segment
+    l2, h2 = _slab(-ua * eu - ev * va, ev, 0.0, ln)  # projection onto the segment
+    sl, sh = np.maximum(l1, l2), np.minimum(h1, h2)
+    ok = good & (sl <= sh)
+    return np.where(ok, np.minimum(lo, sl), lo), np.where(ok, np.maximum(hi, sh), hi)
+
+
+def _free_intervals(
+    lines: _Lines, obstacles: Obstacles, r: float
+) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
+    """Free intervals of all sweep lines: line index, lower and upper lateral offset [m].
+
+    Sorted by line, then offset. Blocked are the points within ``r`` of an obstacle's
+    boundary (the union of its edges' capsules) and the points inside it.
+    """
+    open_line = lines.hi >= lines.lo
+    b_line = np.zeros(0, dtype=np.int64)
+    b_lo = b_hi = np.zeros(0)
+    if len(obstacles):
+        a_xy = lines.center + np.minimum(lines.lo, lines.hi)[:, None] * lines.normal
+        b_xy = lines.center + lines.hi[:, None] * lines.normal
+        li, ob = _cull(a_xy, b_xy, obstacles.bbox, r)
+        keep = open_line[li]
+        li, ob = li[keep], ob[keep]
+        pl, edge = _expand_edges(li, ob, obstacles.offsets)
+        start, end, owner = polygon_edges(obstacles.vertices, obstacles.offsets)
+        c, t, n = lines.center[pl], lines.tangent[pl], lines.normal[pl]
+        wa, wb = start[edge] - c, end[edge] - c
+        ua = wa[:, 0] * t[:, 0] + wa[:, 1] * t[:, 1]
+        va = wa[:, 0] * n[:, 0] + wa[:, 1] * n[:, 1]
+        ub = wb[:, 0] * t[:, 0] + wb[:, 1] * t[:, 1]
+        vb = wb[:, 0] * n[:, 0] + wb[:, 1] * n[:, 1]
+        cap_lo, cap_hi = _capsule_on_line(ua, va, ub, vb, r)
+        # interior: pair up the boundary crossings of each (line, polygon) along the line
+        cross = (ua > 0) != (ub > 0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            vc = va + (0.0 - ua) * (vb - va) / (ub - ua)
+        cl, co, cv = pl[cross], owner[edge][cross], vc[cross]
+        order = np.lexsort((cv, co, cl))
+        cl, cv = cl[order], cv[order]
+        even = np.arange(0, len(cv), 2)
+        b_line = np.concatenate((pl, cl[even]))
+        b_lo = np.concatenate((cap_lo, cv[even]))
+        b_hi = np.concatenate((cap_hi, cv[even + 1]))
+    lo_k, hi_k = lines.lo[b_line], lines.hi[b_line]
+    # blocked sets are open intervals; only those that cut into [lo, hi] matter
+    keep = (b_hi > b_lo) & (b_hi > lo_k) & (b_lo < hi_k)
+    b_line, b_lo, b_hi = b_line[keep], b_lo[keep], b_hi[keep]
+    lo_k, hi_k = lo_k[keep], hi_k[keep]
+    span = float(np.max(lines.hi - lines.lo, initial=0.0)) + 4.0
+    rel_lo = np.clip(b_lo - lo_k, -1.0, None)
+    rel_hi = np.clip(b_hi - lo_k, None, hi_k - lo_k + 1.0)
+    order = np.lexsort((rel_lo, b_line))
+    b_line, rel_lo, rel_hi = b_line[order], rel_lo[order], rel_hi[order]
+    base = b_line * span
+    run = np.maximum.accumulate(rel_hi + base) if len(base) else base.astype(float)
+    prev = np.concatenate(([-np.inf], run[:-1]))
+    prev_end = np.maximum(prev - base, 0.0)  # free from here (relative to lo) ...
+    gap = rel_lo - prev_end  # ... up to the next blocked interval's start
+    g = gap >= 0
+    f_line = [b_line[g]]
+    f_lo = [prev_end[g] + lines.lo[b_line[g]]]
+    f_hi = [rel_lo[g] + lines.lo[b_line[g]]]
+    # the stretch after each line's last blocked interval, and lines without any
+    last = np.ones(len(b_line), dtype=bool)
+    last[:-1] = b_line[1:] != b_line[:-1]
+    tail_line = b_line[last]
+    tail_lo = np.maximum(run[last] - base[last], 0.0) + lines.lo[tail_line]
+    tail_hi = lines.hi[tail_line]
+    none = np.setdiff1d(np.flatnonzero(open_line), tail_line)
+    f_line += [tail_line, none]
+    f_lo += [tail_lo, lines.lo[none]]
+    f_hi += [tail_hi, lines.hi[none]]
+    fl, flo, fhi = np.concatenate(f_line), np.concatenate(f_lo), np.concatenate(f_hi)
+    ok = fhi >= flo
+    fl, flo, fhi = fl[ok], flo[ok], fhi[ok]
+    order = np.lexsort((flo, fl))
+    return fl[order].astype(np.int64), flo[order], fhi[order]
+
+
+def _ragged_pairs(
+    ga: NDArray[np.int64], gb: NDArray[np.int64], ngroup: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """All pairs (i, j) with ``ga[i] == gb[j]``; ``ga`` and ``gb`` sorted group labels."""
+    ca = np.bincount(ga, minlength=ngroup)
+    cb = np.bincount(gb, minlength=ngroup)
+    sa = np.cumsum(ca) - ca
+    sb = np.cumsum(cb) - cb
+    p = ca * cb
+    grp = np.repeat(np.arange(ngroup), p)
+    j = np.arange(int(p.sum())) - np.repeat(np.cumsum(p) - p, p)
+    return sa[grp] + j // cb[grp], sb[grp] + j % cb[grp]
+
+
+#: Where, as fractions of the common lateral range of two intervals, the link between
+#: them is tried when the straight segment between their midpoints is not free.
+_OVERLAP_TRIES = (0.5, 0.25, 0.75, 0.05, 0.95)
+#: Fractions ``t`` of segments from ``lo + t w`` on one line to ``lo + t w`` on the next.
+_PROPORTIONAL_TRIES = (0.25, 0.75, 0.05, 0.95)
+
+
+@dataclass(frozen=True)
+class _Arcs:
+    """Arcs ``(E, 2)``, their lengths [m] between the vertices, whether that straight
+    segment is free, and the free link ``(E, 2, 2)`` [m] found between the two lines."""
+
+    pairs: NDArray[np.int64]
+    length: FloatArray
+    direct: NDArray[np.bool_]
+    link: FloatArray
+
+
+def _arcs(
+    corridor: Corridor, lines: _Lines, vline: NDArray[np.int64], vlo: FloatArray,
+    vhi: FloatArray, obstacles: Obstacles, r: float,
+) -> _Arcs:
+    """Arcs between vertices of consecutive lines that the vehicle can pass between.
+
+    The passage from vertex ``a`` (line k) to vertex ``b`` (line k + 1) is: along line k
+    inside ``a``'s free interval to a point ``p``, straight to a point ``q`` of ``b``'s
+    interval on line k + 1, along that line to ``b``. Moving inside a free interval is
+    free, so the arc exists when some straight link ``p -> q`` is free. Tried in turn: the
+    midpoints themselves (then the polyline of vertices is free there), links at constant
+    lateral offset across the intervals' common range, and links joining the same
+    fraction of both intervals.
+    """
+    nline = len(lines.lo)
+    nband = max(nline - 1, 0)
+    in_tail = vline < nline - 1
+    ia, ib = _ragged_pairs(vline[in_tail], vline[vline > 0] - 1, nband)
+    head = np.flatnonzero(in_tail)[ia]
+    tail = np.flatnonzero(vline > 0)[ib]
+    band = vline[head]
+    culled = _band_edges(lines, obstacles, r, nband)
+
+    def point(line: NDArray[np.int64], lat: FloatArray) -> FloatArray:
+        return np.asarray(lines.center[line] + lat[:, None] * lines.normal[line])
+
+    lo_a, hi_a, lo_b, hi_b = vlo[head], vhi[head], vlo[tail], vhi[tail]
+    found = np.zeros(len(head), dtype=bool)
+    link = np.zeros((len(head), 2, 2))
+    tries: list[tuple[FloatArray, FloatArray, NDArray[np.bool_]]] = [
+        ((lo_a + hi_a) / 2.0, (lo_b + hi_b) / 2.0, np.ones(len(head), dtype=bool))]
+    c_lo, c_hi = np.maximum(lo_a, lo_b), np.minimum(hi_a, hi_b)
+    common = c_hi >= c_lo
+    for f in _OVERLAP_TRIES:
+        lat = c_lo + f * (c_hi - c_lo)
+        tries.append((lat, lat, common))
+    for f in _PROPORTIONAL_TRIES:
+        tries.append((lo_a + f * (hi_a - lo_a), lo_b + f * (hi_b - lo_b),
+                      np.ones(len(head), dtype=bool)))
+    bent = _bent_bands(corridor, lines.station)
+    # first the midpoints, then every other try at once for the arcs still missing
+    la, lb, _ = tries[0]
+    p, q = point(band, la), point(band + 1, lb)
+    direct = _links_free(corridor, lines, culled, bent, obstacles, band, p, q, r)
+    found[:] = direct
+    link[direct, 0], link[direct, 1] = p[direct], q[direct]
+    rest = np.flatnonzero(~direct)
+    if len(rest):
+        la = np.stack([t[0][rest] for t in tries[1:]])  # (tries, pairs)
+        lb = np.stack([t[1][rest] for t in tries[1:]])
+        valid = np.stack([t[2][rest] for t in tries[1:]])
+        ti, pi = np.nonzero(valid)
+        idx = rest[pi]
+        p, q = point(band[idx], la[ti, pi]), point(band[idx] + 1, lb[ti, pi])
+        ok = _links_free(corridor, lines, culled, bent, obstacles, band[idx], p, q, r)
+        # the first free try of each arc (tries are in order within each arc)
+        order = np.lexsort((ti[ok], idx[ok]))
+        got, first = np.unique(idx[ok][order], return_index=True)
+        sel = np.flatnonzero(ok)[order][first]
+        found[got] = True
+        link[got, 0], link[got, 1] = p[sel], q[sel]
+    pairs = np.column_stack((head[found], tail[found])).astype(np.int64)
+    mid_a = point(band[found], (lo_a[found] + hi_a[found]) / 2.0)
+    mid_b = point(band[found] + 1, (lo_b[found] + hi_b[found]) / 2.0)
+    seg = mid_b - mid_a
+    return _Arcs(pairs, np.hypot(seg[:, 0], seg[:, 1]), direct[found], link[found])
+
+
+def _band_edges(
+    lines: _Lines, obstacles: Obstacles, r: float, nband: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Obstacle edges near each band between consecutive lines: (band, edge), by band."""
+    if len(obstacles) == 0 or nband == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    lo_l = np.minimum(lines.lo, lines.hi)
+    ends = np.stack((lines.center + lo_l[:, None] * lines.normal,
+                     lines.center + lines.hi[:, None] * lines.normal))
+    lo = np.minimum(ends[:, :-1].min(axis=0), ends[:, 1:].min(axis=0))
+    hi = np.maximum(ends[:, :-1].max(axis=0), ends[:, 1:].max(axis=0))
+    bi, ob = _cull(lo, hi, obstacles.bbox, r)
+    be, edge = _expand_edges(bi, ob, obstacles.offsets)
+    order = np.argsort(be, kind="stable")
+    return be[order], edge[order]
+
+
+def _links_free(
+    corridor: Corridor, lines: _Lines, culled: tuple[NDArray[np.int64], NDArray[np.int64]],
+    bent: NDArray[np.bool_], obstacles: Obstacles, band: NDArray[np.int64], p: FloatArray,
+    q: FloatArray, r: float,
+) -> NDArray[np.bool_]:
+    """Whether segments ``p -> q`` across bands ``band`` keep ``r`` from every obstacle
+    (exact segment-to-edge distances; the ends lie outside every obstacle) and stay on the
+    shrunk road."""
+    ok = np.ones(len(band), dtype=bool)
+    be, edge = culled
+    if len(be) and len(band):
+        order = np.argsort(band, kind="stable")
+        ai, ei = _ragged_pairs(band[order], be, len(lines.lo) - 1)
+        ai = order[ai]
+        start, end, _ = polygon_edges(obstacles.vertices, obstacles.offsets)
+        a, b = start[edge[ei]], end[edge[ei]]
+        pa, qa = p[ai], q[ai]
+        near = ((np.minimum(pa[:, 0], qa[:, 0]) - r <= np.maximum(a[:, 0], b[:, 0]))
+                & (np.maximum(pa[:, 0], qa[:, 0]) + r >= np.minimum(a[:, 0], b[:, 0]))
+                & (np.minimum(pa[:, 1], qa[:, 1]) - r <= np.maximum(a[:, 1], b[:, 1]))
+                & (np.maximum(pa[:, 1], qa[:, 1]) + r >= np.minimum(a[:, 1], b[:, 1])))
+        ai = ai[near]
+        dist = _segment_distance(pa[near], qa[near], a[near], b[near])
+        ok[ai[dist < r - _EPS]] = False
+    return ok & _within_road(corridor, lines, bent, band, p, q)
+
+
+def _cross(ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray) -> FloatArray:
+    return np.asarray(ax * by - ay * bx)
+
+
+def _point_segment(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    ab = b - a
+    ap = p - a
+    den = ab[:, 0] ** 2 + ab[:, 1] ** 2
+    t = np.clip((ap[:, 0] * ab[:, 0] + ap[:, 1] * ab[:, 1]) / np.where(den > 0, den, 1.0),
+                0.0, 1.0)
+    dx = ap[:, 0] - t * ab[:, 0]
+    dy = ap[:, 1] - t * ab[:, 1]
+    return np.asarray(np.hypot(dx, dy))
+
+
+def _segment_distance(p: FloatArray, q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    """Distance [m] between segments ``p -> q`` and ``a -> b``, row by row ``(n, 2)``."""
+    d = np.minimum(np.minimum(_point_segment(a, p, q), _point_segment(b, p, q)),
+                   np.minimum(_point_segment(p, a, b), _point_segment(q, a, b)))
+    pq, ab = q - p, b - a
+    o1 = _cross(pq[:, 0], pq[:, 1], a[:, 0] - p[:, 0], a[:, 1] - p[:, 1])
+    o2 = _cross(pq[:, 0], pq[:, 1], b[:, 0] - p[:, 0], b[:, 1] - p[:, 1])
+    o3 = _cross(ab[:, 0], ab[:, 1], p[:, 0] - a[:, 0], p[:, 1] - a[:, 1])
+    o4 = _cross(ab[:, 0], ab[:, 1], q[:, 0] - a[:, 0], q[:, 1] - a[:, 1])
+    proper = (o1 * o2 < 0) & (o3 * o4 < 0)
+    return np.where(proper, 0.0, d)
+
+
+def _bent_bands(corridor: Corridor, stations: FloatArray) -> NDArray[np.bool_]:
+    """Whether the reference line or a boundary offset bends between consecutive
+    stations ``(n - 1,)``."""
+    s = corridor.s
+    kink = np.zeros(len(s))
+    if len(s) > 2:
+        h = corridor.heading_at((s[:-1] + s[1:]) / 2.0)
+        ds = np.diff(s)
+        kink[1:-1] = ((np.abs(wrap_angle(np.diff(h))) > 1e-12)
+                      | (np.abs(np.diff(np.diff(corridor.left) / ds)) > 1e-12)
+                      | (np.abs(np.diff(np.diff(corridor.right) / ds)) > 1e-12))
+    ck = np.concatenate(([0.0], np.cumsum(kink)))
+    inner = (ck[np.searchsorted(s, stations[1:], side="left")]
+             - ck[np.searchsorted(s, stations[:-1], side="right")])
+    return np.asarray(inner > 0)
+
+
+def _within_road(
+    corridor: Corridor, lines: _Lines, bent: NDArray[np.bool_], band: NDArray[np.int64],
+    p: FloatArray, q: FloatArray,
+) -> NDArray[np.bool_]:
+    """Whether segments ``p -> q`` between lines ``band`` and ``band + 1`` stay on the
+    shrunk road. Both ends do by construction; where the reference line and the boundary
+    offsets are straight over the band the shrunk road is convex there and nothing is
+    left to check; elsewhere the segment is checked at points at most
+    ``REFERENCE_SPACING / 2`` apart."""
+    ok = np.ones(len(band), dtype=bool)
+    sel = np.flatnonzero(bent[band]) if len(band) else np.zeros(0, dtype=np.int64)
+    if len(sel) == 0:
+        return ok
+    gap = float(np.max(np.hypot(*(q[sel] - p[sel]).T)))
+    m = max(2, math.ceil(gap / (REFERENCE_SPACING / 2.0)))
+    f = np.arange(1, m) / m
+    pts = p[sel, None, :] + f[None, :, None] * (q[sel] - p[sel])[:, None, :]
+    sl = corridor.to_sl(pts.reshape(-1, 2))
+    right, left = corridor.bounds_at(sl[:, 0])
+    r = lines.inflation
+    inside = (sl[:, 1] >= right + r - _EPS) & (sl[:, 1] <= left - r + _EPS)
+    ok[sel] = inside.reshape(len(sel), m - 1).all(axis=1)
+    return ok
+
+
+# -- search ------------------------------------------------------------------------------
+def _search(
+    source: int, arcs: NDArray[np.int64], arc_len: FloatArray, width: FloatArray,
+    vline: NDArray[np.int64], nline: int, wmax: float,
+) -> tuple[NDArray[np.int64] | None, NDArray[np.int64] | None, int]:
+    """Widest (capped at ``wmax``), then shortest path from ``source`` to the last line.
+
+    Arcs run from line k to line k + 1 only, so visiting them by line is a topological
+    order: one pass computes each vertex's best bottleneck, a second the shortest path
+    through vertices at least as wide as the capped optimum. Returns the path's vertices
+    and arcs (or None, None) and the last line that some path reaches.
+    """
+    nv = len(width)
+    order = np.argsort(vline[arcs[:, 0]], kind="stable") if len(arcs) else np.zeros(0, int)
+    a_from = arcs[order, 0].tolist()
+    a_to = arcs[order, 1].tolist()
+    a_len = arc_len[order].tolist()
+    w = width.tolist()
+    best = [-math.inf] * nv
+    best[source] = w[source]
+    for u, v in zip(a_from, a_to, strict=True):
+        bu = best[u]
+        if bu > best[v]:
+            cand = bu if bu < w[v] else w[v]
+            if cand > best[v]:
+                best[v] = cand
+    best_arr = np.asarray(best)
+    goal_line = vline == nline - 1
+    if not np.any(goal_line & np.isfinite(best_arr)):
+        reached = vline[np.isfinite(best_arr)]
+        return None, None, int(reached.max()) if len(reached) else -1
+    target = min(float(best_arr[goal_line].max()), wmax)
+    dist = [math.inf] * nv
+    pred = [-1] * nv
+    dist[source] = 0.0
+    a_idx = order.tolist()
+    for u, v, ln, e in zip(a_from, a_to, a_len, a_idx, strict=True):
+        if w[v] >= target and dist[u] + ln < dist[v]:
+            dist[v] = dist[u] + ln
+            pred[v] = e
+    dist_arr = np.where(goal_line, np.asarray(dist), np.inf)
+    v = int(np.argmin(dist_arr))
+    path, steps = [v], []
+    while pred[v] >= 0:
+        steps.append(pred[v])
+        v = int(arcs[pred[v], 0])
+        path.append(v)
+    return (np.asarray(path[::-1], dtype=np.int64), np.asarray(steps[::-1], dtype=np.int64),
+            nline - 1)
+
+
+def _raise_blocked(corridor: Corridor, stations: FloatArray, line: int) -> None:
+    s = float(stations[line])
+    edge = corridor.edge_at(s)
+    where = f" on edge {edge!r}" if edge is not None else ""
+    raise RoadBlockedError(
+        f"road blocked at station {corridor.offset + s:.1f} m{where}: "
+        f"no passage for the vehicle", station=corridor.offset + s, edge=edge)

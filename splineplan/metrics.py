@@ -1,0 +1,119 @@
+"""Metrics of a driven trajectory: footprint distances, accelerations, jerk, summaries.
+
+Pure functions on numpy arrays, no SUMO: the closed loop (:mod:`splineplan.sim`) records
+poses and calls these.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from splineplan.geometry import FloatArray, box_corners, point_segment_distance
+
+
+def footprint(center: ArrayLike, heading: float, length: float, width: float) -> FloatArray:
+    """Corners ``(4, 2)`` [m] of a vehicle's rectangle from its centre and heading [rad]."""
+    c = np.asarray(center, dtype=float).reshape(1, 2)
+    return np.asarray(box_corners(c, np.array([heading]), np.array([length]),
+                                  np.array([width]))[0])
+
+
+def footprints(
+    fronts: ArrayLike, headings: ArrayLike, lengths: ArrayLike, widths: ArrayLike
+) -> FloatArray:
+    """Corners ``(k, 4, 2)`` [m] of rectangles given by front-bumper middles ``(k, 2)``.
+
+    SUMO's position of a vehicle is the middle of its front bumper; headings [rad] are
+    counter-clockwise from east.
+    """
+    f = np.asarray(fronts, dtype=float).reshape(-1, 2)
+    h = np.asarray(headings, dtype=float).reshape(-1)
+    ln = np.asarray(lengths, dtype=float).reshape(-1)
+    w = np.asarray(widths, dtype=float).reshape(-1)
+    centers = f - (ln / 2.0)[:, None] * np.column_stack((np.cos(h), np.sin(h)))
+    return np.asarray(box_corners(centers, h, ln, w))
+
+
+def box_distances(box: ArrayLike, others: ArrayLike) -> FloatArray:
+    """Distance [m] between a convex quadrilateral ``(4, 2)`` and each of ``(k, 4, 2)``.
+
+    Zero where they touch or overlap (also when edges cross with no corner inside the
+    other box, or when one box contains the other).
+    """
+    a = np.asarray(box, dtype=float).reshape(4, 2)
+    b = np.asarray(others, dtype=float).reshape(-1, 4, 2)
+    k = len(b)
+    if k == 0:
+        return np.zeros(0)
+    a1 = np.roll(a, -1, axis=0)
+    b1 = np.roll(b, -1, axis=1)
+    # corners of a to edges of b, and corners of b to edges of a: (k, 4, 4)
+    d_ab = point_segment_distance(a[None, :, None, :], b[:, None, :, :], b1[:, None, :, :])
+    d_ba = point_segment_distance(b[:, :, None, :], a[None, None, :, :], a1[None, None, :, :])
+    dist = np.minimum(d_ab.reshape(k, -1).min(axis=1), d_ba.reshape(k, -1).min(axis=1))
+    # proper crossings of an edge of a with an edge of b
+    p, p1 = a[None, :, None, :], a1[None, :, None, :]
+    q, q1 = b[:, None, :, :], b1[:, None, :, :]
+    o1 = _cross(p, p1, q)
+    o2 = _cross(p, p1, q1)
+    o3 = _cross(q, q1, p)
+    o4 = _cross(q, q1, p1)
+    crossing = ((o1 * o2 < 0) & (o3 * o4 < 0)).reshape(k, -1).any(axis=1)
+    inside = _convex_contains(b, a).any(axis=1) | _convex_contains_one(a, b).any(axis=1)
+    dist[crossing | inside] = 0.0
+    return np.asarray(dist)
+
+
+def _cross(o: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
+    return np.asarray((a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1])
+                      - (a[..., 1] - o[..., 1]) * (b[..., 0] - o[..., 0]))
+
+
+def _convex_contains(polys: FloatArray, pts: FloatArray) -> np.ndarray:
+    """Whether each of ``pts (m, 2)`` lies inside each convex ``polys (k, 4, 2)``: ``(k, m)``."""
+    e0 = polys[:, None, :, :]
+    e1 = np.roll(polys, -1, axis=1)[:, None, :, :]
+    c = _cross(e0, e1, pts[None, :, None, :])
+    return np.asarray((c > 0).all(axis=2) | (c < 0).all(axis=2))
+
+
+def _convex_contains_one(poly: FloatArray, pts: FloatArray) -> np.ndarray:
+    """Whether each corner of ``pts (k, 4, 2)`` lies inside the convex ``poly (4, 2)``."""
+    k = len(pts)
+    inside = _convex_contains(poly[None], pts.reshape(-1, 2))[0]
+    return np.asarray(inside.reshape(k, 4))
+
+
+def dynamics(t: ArrayLike, heading: ArrayLike, speed: ArrayLike) -> dict[str, FloatArray]:
+    """Longitudinal and lateral acceleration [m/s^2] and jerk [m/s^3] of a driven path.
+
+    ``t`` ``(n,)`` [s], ``heading`` ``(n,)`` [rad], ``speed`` ``(n,)`` [m/s]. The lateral
+    acceleration is ``v * dheading/dt``; jerk is the rate of change of the acceleration
+    vector ``(a_lon, a_lat)`` in the vehicle's frame.
+    """
+    tt = np.asarray(t, dtype=float)
+    v = np.asarray(speed, dtype=float)
+    if len(tt) < 3 or np.any(np.diff(tt) <= 0):
+        z = np.zeros(len(tt))
+        return {"a_lon": z, "a_lat": z, "jerk": z}
+    yaw_rate = np.gradient(np.unwrap(np.asarray(heading, dtype=float)), tt)
+    a_lat = v * yaw_rate
+    a_lon = np.gradient(v, tt)
+    jerk = np.hypot(np.gradient(a_lon, tt), np.gradient(a_lat, tt))
+    return {"a_lon": a_lon, "a_lat": a_lat, "jerk": jerk}
+
+
+def summary_stats(values: ArrayLike) -> dict[str, Any]:
+    """Count, median and maximum of a sample (``None`` where empty)."""
+    x = np.asarray(values, dtype=float)
+    if len(x) == 0:
+        return {"count": 0, "median": None, "max": None}
+    return {"count": len(x), "median": float(np.median(x)), "max": float(np.max(x))}
+
+
+def finite_or_none(value: float) -> float | None:
+    """A float for JSON: ``None`` for infinities and NaN."""
+    return float(value) if np.isfinite(value) else None

@@ -1,0 +1,585 @@
+"""SUMO road networks as compact arrays: the edge graph of level 1 and lane geometry.
+
+This is the only module that reads SUMO files. :func:`load_network` reads a ``.net.xml`` or
+``.net.xml.gz`` with sumolib and keeps plain arrays and small frozen records.
+
+The graph
+---------
+A vertex is a normal SUMO edge (a road in one direction); internal (junction) edges, whose
+ids start with ``':'``, are not vertices. An arc ``e -> f`` exists for a vehicle class where a
+connection leads from a lane of ``e`` to a lane of ``f`` such that the class may use the
+from-lane, the to-lane, the connection itself and every internal (via) lane it runs over.
+The arcs are stored per class in CSR form (:class:`ClassGraph`), built on first use and cached.
+
+Length convention (the same as ``sumolib.net.Net.getShortestPath``)
+------------------------------------------------------------------
+The length of a route ``e0, e1, ..., ek`` is::
+
+    (length(e0) - start_pos) + sum_i ( internal(e_{i-1} -> e_i) + length(e_i) )
+
+where an edge's length is that of its first lane (SUMO's ``length`` attribute, which can
+differ from the length of the drawn shape), the last edge counts in full, and
+``internal(e -> f)`` is the length of the shortest chain of internal lanes over which an
+allowed connection from ``e`` to ``f`` runs (0 where no allowed connection has internal
+lanes, e.g. in networks built without them). By travel time, every length is divided by
+its lane's (for an edge: its last lane's) speed limit, and the internal chain is the one
+of least time. A route of one edge has the length ``length(e0) - start_pos``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from splineplan.corridor import Corridor
+from splineplan.errors import (
+    GeometryError,
+    NetworkError,
+    UnknownEdgeError,
+    VehicleClassError,
+)
+from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations
+from splineplan.obstacles import Obstacles
+
+log = logging.getLogger(__name__)
+
+IntArray = NDArray[np.int64]
+
+#: SUMO's vehicle classes (SUMO 1.x, without the deprecated aliases).
+VEHICLE_CLASSES: frozenset[str] = frozenset((
+    "private", "emergency", "authority", "army", "vip", "passenger", "hov", "taxi", "bus",
+    "coach", "delivery", "truck", "trailer", "tram", "rail_urban", "rail", "rail_electric",
+    "motorcycle", "moped", "bicycle", "pedestrian", "evehicle", "ship", "container",
+    "cable_car", "subway", "aircraft", "wheelchair", "scooter", "drone", "custom1", "custom2",
+))
+
+
+@dataclass(frozen=True, eq=False)
+class Lane:
+    """One lane of a normal or internal edge.
+
+    Attributes
+    ----------
+    id
+        SUMO lane id, ``<edge>_<index>``.
+    index
+        Index within its edge, 0 = rightmost.
+    width, length, speed
+        Width [m], length [m] (SUMO's attribute) and speed limit [m/s].
+    shape
+        Centre line ``(n, 2)`` [m] in the direction of travel.
+    allowed
+        Vehicle classes that may use the lane.
+    """
+
+    id: str
+    index: int
+    width: float
+    length: float
+    speed: float
+    shape: FloatArray
+    allowed: frozenset[str]
+
+    def allows(self, vclass: str) -> bool:
+        """Whether vehicle class ``vclass`` may use this lane."""
+        return vclass in self.allowed
+
+
+@dataclass(frozen=True)
+class Connection:
+    """A link from a lane of one normal edge to a lane of the next.
+
+    Attributes
+    ----------
+    from_edge, to_edge
+        Normal edge ids.
+    from_lane, to_lane
+        Lane indices on those edges.
+    via
+        Internal lane ids the link runs over, in order (empty where the network has none).
+    allowed
+        Vehicle classes the connection itself admits.
+    direction
+        SUMO's direction code: ``s`` straight, ``l``/``r`` left/right, ``t`` turnaround, ...
+    """
+
+    from_edge: str
+    to_edge: str
+    from_lane: int
+    to_lane: int
+    via: tuple[str, ...]
+    allowed: frozenset[str]
+    direction: str
+
+
+@dataclass(frozen=True, eq=False)
+class ClassGraph:
+    """The edge graph of one vehicle class, in CSR form.
+
+    Attributes
+    ----------
+    vclass
+        The vehicle class.
+    usable
+        ``(n,)`` whether the class may use some lane of each edge.
+    indptr, indices
+        CSR arrays: the arcs of edge ``e`` lead to ``indices[indptr[e]:indptr[e + 1]]``.
+    via_length, via_time
+        ``(m,)`` length [m] and travel time [s] of each arc's shortest (fastest) internal
+        lane chain, 0 where the connections have none.
+    """
+
+    vclass: str
+    usable: NDArray[np.bool_]
+    indptr: IntArray
+    indices: IntArray
+    via_length: FloatArray
+    via_time: FloatArray
+
+    @property
+    def n_arcs(self) -> int:
+        """Number of arcs."""
+        return len(self.indices)
+
+
+@dataclass(frozen=True, eq=False)
+class RoadNetwork:
+    """A SUMO network: normal edges as arrays, lanes and connections as records.
+
+    Use :func:`load_network` to build one. Edge ``i`` of every array is ``edge_ids[i]``.
+
+    Attributes
+    ----------
+    path
+        The file it was read from.
+    edge_ids
+        Normal edge ids ``(n,)``.
+    lengths
+        Edge lengths ``(n,)`` [m] (SUMO's length of the first lane).
+    speeds
+        Edge speed limits ``(n,)`` [m/s] (of the last lane, as sumolib).
+    lanes
+        Per edge, its lanes from right to left.
+    connections
+        Every connection between normal edges.
+    internal_lanes
+        Internal (junction) lanes by id.
+    bounds
+        ``(xmin, ymin, xmax, ymax)`` [m] of the lane shapes.
+    """
+
+    path: Path
+    edge_ids: tuple[str, ...]
+    lengths: FloatArray
+    speeds: FloatArray
+    lanes: tuple[tuple[Lane, ...], ...]
+    connections: tuple[Connection, ...]
+    internal_lanes: dict[str, Lane]
+    bounds: tuple[float, float, float, float]
+    _index: dict[str, int] = field(repr=False)
+    _conn_from: IntArray = field(repr=False)
+    _conn_to: IntArray = field(repr=False)
+    _graphs: dict[str, ClassGraph] = field(default_factory=dict, repr=False)
+
+    @property
+    def n_edges(self) -> int:
+        """Number of normal edges."""
+        return len(self.edge_ids)
+
+    def __contains__(self, edge_id: object) -> bool:
+        return edge_id in self._index
+
+    def edge_index(self, edge_id: str) -> int:
+        """Index of a normal edge; :class:`UnknownEdgeError` naming it if absent."""
+        try:
+            return self._index[edge_id]
+        except KeyError:
+            hint = " (internal edges cannot be used)" if str(edge_id).startswith(":") else ""
+            raise UnknownEdgeError(
+                f"edge '{edge_id}' is not in network {self.path.name}{hint}") from None
+
+    def lanes_of(self, edge_id: str) -> tuple[Lane, ...]:
+        """Lanes of a normal edge, rightmost first."""
+        return self.lanes[self.edge_index(edge_id)]
+
+    def length_of(self, edge_id: str) -> float:
+        """Length [m] of a normal edge."""
+        return float(self.lengths[self.edge_index(edge_id)])
+
+    def allows(self, edge_id: str, vclass: str) -> bool:
+        """Whether ``vclass`` may use some lane of ``edge_id``."""
+        i = self.edge_index(edge_id)
+        return bool(self.graph(vclass).usable[i])
+
+    def internal_lane(self, lane_id: str) -> Lane:
+        """An internal (junction) lane by id."""
+        try:
+            return self.internal_lanes[lane_id]
+        except KeyError:
+            raise UnknownEdgeError(f"internal lane '{lane_id}' is not in network "
+                                   f"{self.path.name}") from None
+
+    def connections_between(self, from_edge: str, to_edge: str, *,
+                            vclass: str | None = None) -> tuple[Connection, ...]:
+        """Connections from ``from_edge`` to ``to_edge``, only those ``vclass`` may use if given."""
+        i, j = self.edge_index(from_edge), self.edge_index(to_edge)
+        lo, hi = np.searchsorted(self._conn_from, [i, i + 1])
+        ks = [k for k in range(int(lo), int(hi)) if self._conn_to[k] == j]
+        conns = [self.connections[k] for k in ks]
+        if vclass is not None:
+            check_vclass(vclass)
+            conns = [c for c in conns if self._connection_allows(c, vclass)]
+        return tuple(conns)
+
+    def graph(self, vclass: str) -> ClassGraph:
+        """The edge graph of ``vclass`` (built on first use, then cached)."""
+        g = self._graphs.get(vclass)
+        if g is None:
+            check_vclass(vclass)
+            g = _build_graph(self, vclass)
+            self._graphs[vclass] = g
+        return g
+
+    def _connection_allows(self, c: Connection, vclass: str) -> bool:
+        fl = self.lanes_of(c.from_edge)[c.from_lane]
+        tl = self.lanes_of(c.to_edge)[c.to_lane]
+        return (vclass in c.allowed and fl.allows(vclass) and tl.allows(vclass)
+                and all(self.internal_lanes[v].allows(vclass) for v in c.via))
+
+
+def check_vclass(vclass: str) -> None:
+    """Raise :class:`VehicleClassError` unless ``vclass`` is a SUMO vehicle class."""
+    if vclass not in VEHICLE_CLASSES:
+        raise VehicleClassError(
+            f"unknown vehicle class '{vclass}'; SUMO's classes are e.g. passenger, bus, "
+            "truck, bicycle, pedestrian")
+
+
+def load_network(path: str | Path) -> RoadNetwork:
+    """Read a SUMO network file (``.net.xml`` or ``.net.xml.gz``).
+
+    Raises
+    ------
+    NetworkError
+        The file is missing, unreadable or not a SUMO network.
+    """
+    import sumolib  # deferred: heavy, and only this module touches it
+
+    p = Path(path)
+    if not p.is_file():
+        raise NetworkError(f"network file not found: {p}")
+    try:
+        net = sumolib.net.readNet(str(p), withInternal=True, withFoes=False, maxcache=0)
+    except Exception as err:  # sumolib raises whatever its XML parser raises
+        raise NetworkError(f"cannot read SUMO network {p}: {err}".splitlines()[0]) from err
+    try:
+        return _from_sumolib(p, net)
+    except (KeyError, ValueError, IndexError, AttributeError) as err:
+        raise NetworkError(f"{p} is not a usable SUMO network: {err}") from err
+
+
+def _from_sumolib(path: Path, net: Any) -> RoadNetwork:
+    """Copy what splineplan needs out of a sumolib ``Net``."""
+    all_classes = VEHICLE_CLASSES
+    perm_cache: dict[frozenset[str], frozenset[str]] = {}
+
+    def perms(allowed: Iterable[str]) -> frozenset[str]:
+        fs = frozenset(allowed)
+        if "all" in fs:
+            fs = all_classes
+        return perm_cache.setdefault(fs, fs)
+
+    def lane_record(lane: Any, index: int) -> Lane:
+        shape = np.asarray([pt[:2] for pt in lane.getShape()], dtype=float).reshape(-1, 2)
+        shape.setflags(write=False)
+        return Lane(id=f"{lane.getEdge().getID()}_{index}", index=index,
+                    width=float(lane.getWidth()), length=float(lane.getLength()),
+                    speed=float(lane.getSpeed()), shape=shape,
+                    allowed=perms(lane.getPermissions()))
+
+    normal = []
+    internal: dict[str, Lane] = {}
+    for e in net.getEdges(withInternal=True):
+        fn = e.getFunction()
+        if fn == "":
+            normal.append(e)
+        elif fn == "internal":
+            for k, ln in enumerate(e.getLanes()):
+                rec = lane_record(ln, k)
+                internal[rec.id] = rec
+    if not normal:
+        raise NetworkError(f"{path} is not a SUMO network (it has no edges)")
+
+    edge_ids = tuple(e.getID() for e in normal)
+    index = {eid: i for i, eid in enumerate(edge_ids)}
+    lanes = tuple(tuple(lane_record(ln, k) for k, ln in enumerate(e.getLanes()))
+                  for e in normal)
+    lengths = np.array([e.getLength() for e in normal], dtype=float)
+    speeds = np.array([e.getSpeed() for e in normal], dtype=float)
+
+    # the internal lane that follows each internal lane (internal junctions split a link)
+    next_via: dict[str, str] = {}
+    for lid in internal:
+        ln = net.getLane(lid)
+        out = ln.getOutgoing()
+        if out and out[0].getViaLaneID():
+            next_via[lid] = out[0].getViaLaneID()
+
+    conns: list[Connection] = []
+    for e in normal:
+        for f, cs in e.getOutgoing().items():
+            if f.getFunction() != "":
+                continue
+            for c in cs:
+                chain: list[str] = []
+                v = c.getViaLaneID() or ""
+                while v and v in internal and len(chain) < 16:
+                    chain.append(v)
+                    v = next_via.get(v, "")
+                conns.append(Connection(
+                    from_edge=e.getID(), to_edge=f.getID(),
+                    from_lane=c.getFromLane().getIndex(), to_lane=c.getToLane().getIndex(),
+                    via=tuple(chain), allowed=perms(c._allowed),
+                    direction=str(c.getDirection())))
+    conns.sort(key=lambda c: (index[c.from_edge], index[c.to_edge], c.from_lane, c.to_lane))
+    conn_from = np.array([index[c.from_edge] for c in conns], dtype=np.int64)
+    conn_to = np.array([index[c.to_edge] for c in conns], dtype=np.int64)
+
+    pts = [ln.shape for ls in lanes for ln in ls if len(ln.shape)]
+    allpts = np.concatenate(pts) if pts else np.zeros((1, 2))
+    lo, hi = allpts.min(axis=0), allpts.max(axis=0)
+    for a in (lengths, speeds, conn_from, conn_to):
+        a.setflags(write=False)
+    log.info("loaded %s: %d edges, %d connections, %d internal lanes",
+             path, len(edge_ids), len(conns), len(internal))
+    return RoadNetwork(
+        path=path, edge_ids=edge_ids, lengths=lengths, speeds=speeds, lanes=lanes,
+        connections=tuple(conns), internal_lanes=internal,
+        bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
+        _index=index, _conn_from=conn_from, _conn_to=conn_to)
+
+
+def _build_graph(net: RoadNetwork, vclass: str) -> ClassGraph:
+    """CSR arcs of ``vclass``: one per (from, to) pair with at least one allowed connection."""
+    n = net.n_edges
+    usable = np.array([any(vclass in ln.allowed for ln in ls) for ls in net.lanes], dtype=bool)
+    keys: list[int] = []
+    vlen: list[float] = []
+    vtime: list[float] = []
+    for c in net.connections:
+        if not net._connection_allows(c, vclass):
+            continue
+        keys.append(net._index[c.from_edge] * n + net._index[c.to_edge])
+        if c.via:
+            vias = [net.internal_lanes[v] for v in c.via]
+            vlen.append(sum(v.length for v in vias))
+            vtime.append(sum(v.length / v.speed for v in vias))
+        else:  # as sumolib: a link without internal lanes does not count
+            vlen.append(np.inf)
+            vtime.append(np.inf)
+    if keys:
+        k = np.asarray(keys, dtype=np.int64)
+        order = np.argsort(k, kind="stable")
+        k = k[order]
+        starts = np.flatnonzero(np.concatenate(([True], k[1:] != k[:-1])))
+        via_length = np.minimum.reduceat(np.asarray(vlen)[order], starts)
+        via_time = np.minimum.reduceat(np.asarray(vtime)[order], starts)
+        via_length[~np.isfinite(via_length)] = 0.0
+        via_time[~np.isfinite(via_time)] = 0.0
+        uk = k[starts]
+        src, dst = uk // n, uk % n
+    else:
+        src = dst = np.zeros(0, dtype=np.int64)
+        via_length = via_time = np.zeros(0)
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(indptr, src + 1, 1)
+    indptr = np.cumsum(indptr)
+    for a in (usable, indptr, dst, via_length, via_time):
+        a.setflags(write=False)
+    return ClassGraph(vclass, usable, indptr, dst.astype(np.int64), via_length, via_time)
+
+
+# ---- corridor adapter ---------------------------------------------------------------------
+
+def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = None) -> Corridor:
+    """The drivable area of a route as a :class:`~splineplan.corridor.Corridor`.
+
+    On each route edge the area spans from the right side of its rightmost lane that
+    ``vclass`` may use to the left side of its leftmost such lane (lanes between them
+    count as drivable). Through a junction it spans the internal lanes of the allowed
+    connections to the next route edge, from the rightmost to the leftmost. The reference
+    line runs midway between those two boundaries. Junction stretches count towards the
+    edge before them in ``edge_at``. The corridor covers the whole first edge (also when
+    the route starts at ``start_pos > 0``).
+
+    Parameters
+    ----------
+    route
+        A :class:`splineplan.route.Route` (anything with ``edges`` and ``vclass``).
+    vclass
+        Vehicle class; defaults to the route's.
+    """
+    cls = vclass if vclass is not None else getattr(route, "vclass", "passenger")
+    check_vclass(cls)
+    edges = tuple(route.edges)
+    if not edges:
+        raise GeometryError("route has no edges")
+    pieces: list[tuple[FloatArray, FloatArray, FloatArray]] = []
+    starts: list[int] = []  # index into pieces where each edge's own stretch begins
+    for i, eid in enumerate(edges):
+        lanes = [ln for ln in network.lanes_of(eid) if ln.allows(cls)]
+        if not lanes:
+            raise GeometryError(f"vehicle class '{cls}' may use no lane of edge '{eid}'")
+        starts.append(len(pieces))
+        pieces.append(_band(lanes[0].shape, lanes[0].width, lanes[-1].shape, lanes[-1].width))
+        if i + 1 < len(edges):
+            conns = [c for c in network.connections_between(eid, edges[i + 1], vclass=cls)
+                     if c.via]
+            if not conns:
+                continue  # no internal lanes: the stretches are joined straight
+            conns.sort(key=lambda c: (c.from_lane, c.to_lane))
+            right, left = conns[0], conns[-1]
+            rshape = _via_shape(network, right.via)
+            lshape = _via_shape(network, left.via)
+            rw = network.internal_lanes[right.via[0]].width
+            lw = network.internal_lanes[left.via[0]].width
+            if len(rshape) >= 2 and len(lshape) >= 2:
+                pieces.append(_band(rshape, rw, lshape, lw))
+    refs, lefts, rights, edge_starts = [], [], [], []
+    station = 0.0
+    last: FloatArray | None = None
+    for k, (ref, lo, ro) in enumerate(pieces):
+        if last is not None:
+            station += float(np.hypot(*(ref[0] - last)))
+        if k in starts:
+            edge_starts.append(station)
+        refs.append(ref)
+        lefts.append(lo)
+        rights.append(ro)
+        station += float(polyline_stations(ref)[-1])
+        last = ref[-1]
+    ref_all = np.concatenate(refs)
+    return Corridor.from_reference(ref_all, np.concatenate(lefts), np.concatenate(rights),
+                                   edges=edges, edge_starts=np.asarray(edge_starts))
+
+
+def _via_shape(network: RoadNetwork, via: tuple[str, ...]) -> FloatArray:
+    shapes = [network.internal_lanes[v].shape for v in via]
+    return dedupe_polyline(np.concatenate(shapes))
+
+
+def _band(right_centre: FloatArray, right_width: float, left_centre: FloatArray,
+          left_width: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Reference line and offsets of the band between two lane centre lines.
+
+    Returns the midline ``(n, 2)`` between the centre lines and the left and right
+    offsets ``(n,)`` [m] of the band's outer sides.
+    """
+    r = dedupe_polyline(right_centre)
+    lft = dedupe_polyline(left_centre)
+    if len(r) < 2 or len(lft) < 2:
+        raise GeometryError("lane shape has fewer than two distinct points")
+    if len(r) != len(lft):  # pair points at equal fractions of length, about 1 m apart
+        n = max(len(r), len(lft), int(np.ceil(polyline_stations(r)[-1])) + 1)
+        r, lft = _resample_fraction(r, n), _resample_fraction(lft, n)
+    mid = (r + lft) / 2.0
+    half = np.hypot(*(lft - r).T) / 2.0
+    return mid, half + left_width / 2.0, -(half + right_width / 2.0)
+
+
+def _resample_fraction(points: FloatArray, n: int) -> FloatArray:
+    """``n`` points at equal fractions of the polyline's arc length."""
+    s = polyline_stations(points)
+    t = np.linspace(0.0, s[-1], n)
+    return np.column_stack((np.interp(t, s, points[:, 0]), np.interp(t, s, points[:, 1])))
+
+
+# ---- obstacle files -----------------------------------------------------------------------
+
+#: SUMO's default vehicle dimensions [m] (vType ``DEFAULT_VEHTYPE``).
+SUMO_DEFAULT_LENGTH = 5.0
+SUMO_DEFAULT_WIDTH = 1.8
+
+
+def read_obstacles(network: RoadNetwork, path: str | Path) -> Obstacles:
+    """Static obstacles from a SUMO additional or route file.
+
+    Reads ``<poly>`` elements (their ``shape``; closed or open rings) and vehicles with a
+    ``<stop>`` on a lane (``lane`` and ``endPos``; SUMO puts the front bumper at ``endPos``),
+    sized by their ``<vType>`` (SUMO's defaults 5.0 x 1.8 m otherwise) and oriented along
+    the lane.
+
+    Raises
+    ------
+    NetworkError
+        The file is missing, not XML, or a stop names an unknown lane.
+    GeometryError
+        A polygon is malformed.
+    """
+    import xml.etree.ElementTree as ET
+
+    p = Path(path)
+    if not p.is_file():
+        raise NetworkError(f"obstacle file not found: {p}")
+    try:
+        root = ET.parse(p).getroot()
+    except ET.ParseError as err:
+        raise NetworkError(f"cannot read obstacle file {p}: {err}") from err
+    polys: list[FloatArray] = []
+    ids: list[str] = []
+    for el in root.iter("poly"):
+        try:
+            pts = np.array([[float(v) for v in xy.split(",")[:2]]
+                            for xy in el.get("shape", "").split()])
+        except ValueError as err:
+            raise GeometryError(f"{p}: polygon '{el.get('id')}' has a bad shape") from err
+        polys.append(pts)
+        ids.append(el.get("id", f"poly{len(ids)}"))
+    vtypes = {el.get("id"): el for el in root.iter("vType")}
+    lanes = {ln.id: ln for lns in network.lanes for ln in lns}
+    pos, head, lengths, widths, vids = [], [], [], [], []
+    for veh in root.iter("vehicle"):
+        for stop in veh.iter("stop"):
+            lane_id = stop.get("lane")
+            if lane_id is None:
+                continue
+            if lane_id not in lanes:
+                raise NetworkError(f"{p}: vehicle '{veh.get('id')}' stops on unknown lane "
+                                   f"'{lane_id}'")
+            lane = lanes[lane_id]
+            vt = vtypes.get(veh.get("type", ""))
+            length = float(vt.get("length", SUMO_DEFAULT_LENGTH)) if vt is not None \
+                else SUMO_DEFAULT_LENGTH
+            width = float(vt.get("width", SUMO_DEFAULT_WIDTH)) if vt is not None \
+                else SUMO_DEFAULT_WIDTH
+            end = float(stop.get("endPos", lane.length))
+            xy, h = _lane_point(lane, end)
+            pos.append(xy)
+            head.append(h)
+            lengths.append(length)
+            widths.append(width)
+            vids.append(veh.get("id", f"vehicle{len(vids)}"))
+            break  # a vehicle stands at its first stop
+    obstacles = Obstacles.from_polygons(polys, ids) if polys else Obstacles.empty()
+    if pos:
+        obstacles = obstacles + Obstacles.from_boxes(
+            np.array(pos), np.array(head), np.array(lengths), np.array(widths),
+            reference="front", ids=vids)
+    return obstacles
+
+
+def _lane_point(lane: Lane, pos: float) -> tuple[FloatArray, float]:
+    """Point [m] and heading [rad] at ``pos`` [m] along a lane (scaled to its shape)."""
+    shape = lane.shape
+    st = polyline_stations(shape)
+    u = float(np.clip(pos * st[-1] / lane.length if lane.length > 0 else pos, 0.0, st[-1]))
+    i = int(np.clip(np.searchsorted(st, u, side="right") - 1, 0, len(st) - 2))
+    d = shape[i + 1] - shape[i]
+    t = (u - st[i]) / max(st[i + 1] - st[i], 1e-12)
+    return shape[i] + t * d, float(np.arctan2(d[1], d[0]))

@@ -1,0 +1,142 @@
+"""The three levels in one call: road selection, roadmaps and a trajectory.
+
+Level 1 picks the roads; the route's drivable area becomes a corridor; levels 2 and 3 plan
+along it (:func:`splineplan.planner.plan_corridor`). Where level 2 finds a road closed, the
+closed edge is avoided and level 1 plans again, as the paper's conclusion proposes.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from splineplan.corridor import Corridor
+from splineplan.errors import RoadBlockedError
+from splineplan.network import RoadNetwork, route_corridor
+from splineplan.obstacles import Obstacles
+from splineplan.planner import plan_corridor
+from splineplan.roadmap import Roadmap, RoadmapParams
+from splineplan.route import Route, shortest_route
+from splineplan.trajectory import Trajectory, TrajectoryParams
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True, eq=False)
+class Plan:
+    """Result of :func:`plan`.
+
+    Attributes
+    ----------
+    route, corridor
+        The road-level route and its drivable area.
+    roadmaps
+        Level 2's roadmap of each road segment.
+    trajectory
+        The joined level-3 trajectory.
+    blocked
+        Edges found closed by level 2 and avoided by a new road selection, in order.
+    route_seconds, roadmap_seconds, trajectory_seconds
+        Time [s] spent in each level (summed over re-routes).
+    """
+
+    route: Route
+    corridor: Corridor
+    roadmaps: tuple[Roadmap, ...]
+    trajectory: Trajectory
+    blocked: tuple[str, ...]
+    route_seconds: float
+    roadmap_seconds: float
+    trajectory_seconds: float
+
+    @property
+    def total_seconds(self) -> float:
+        """Time [s] of the three levels together."""
+        return self.route_seconds + self.roadmap_seconds + self.trajectory_seconds
+
+
+def plan(
+    network: RoadNetwork,
+    from_edge: str,
+    to_edge: str,
+    obstacles: Obstacles | None = None,
+    *,
+    start_pos: float = 0.0,
+    start_xy: ArrayLike | None = None,
+    start_heading: float | None = None,
+    start_speed: float = 0.0,
+    end_speed: float | None = 0.0,
+    vclass: str = "passenger",
+    weight: str = "length",
+    avoid: Iterable[str] = (),
+    roadmap_params: RoadmapParams | None = None,
+    trajectory_params: TrajectoryParams | None = None,
+    max_reroutes: int = 8,
+) -> Plan:
+    """Plan from a start on ``from_edge`` to the end of ``to_edge`` among obstacles.
+
+    Parameters
+    ----------
+    network
+        The road network (:func:`splineplan.network.load_network`).
+    from_edge, to_edge
+        Origin and destination edge ids.
+    obstacles
+        Static obstacles on the road (default: none).
+    start_pos
+        Position [m] along the origin edge where the vehicle's centre is.
+    start_xy, start_heading
+        The vehicle's centre ``(2,)`` [m] and heading [rad]; by default the middle of the
+        drivable area at ``start_pos``, along the road.
+    start_speed, end_speed
+        Speeds [m/s] at the start and at the goal (``None``: keep going).
+    vclass, weight, avoid
+        As for :func:`splineplan.route.shortest_route`.
+    roadmap_params, trajectory_params
+        Parameters of levels 2 and 3.
+    max_reroutes
+        How many closed edges to plan around before giving up.
+
+    Raises
+    ------
+    NoRouteError
+        No road route avoids the closed edges.
+    RoadBlockedError
+        Level 2 found the road closed on the origin edge itself (no way around it), or
+        after ``max_reroutes`` re-routes.
+    """
+    obstacles = obstacles if obstacles is not None else Obstacles.empty()
+    avoided = list(avoid)
+    blocked: list[str] = []
+    t_route = t_roadmap = t_traj = 0.0
+    while True:
+        t0 = time.perf_counter()
+        route = shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                               avoid=avoided, start_pos=start_pos)
+        corridor = route_corridor(network, route, vclass=vclass)
+        t_route += time.perf_counter() - t0
+        xy = (corridor.to_xy(start_pos, 0.0) if start_xy is None
+              else np.asarray(start_xy, dtype=float).reshape(2))
+        heading = (float(corridor.heading_at(corridor.to_sl(xy)[0, 0]))
+                   if start_heading is None else start_heading)
+        try:
+            result = plan_corridor(corridor, obstacles, xy, heading,
+                                   roadmap_params=roadmap_params, params=trajectory_params,
+                                   start_speed=start_speed, end_speed=end_speed)
+        except RoadBlockedError as err:
+            edge = err.edge
+            if edge is None or edge == from_edge or edge in avoided or \
+                    len(blocked) >= max_reroutes:
+                raise
+            log.info("edge %s closed at station %.1f m: re-routing", edge, err.station)
+            blocked.append(edge)
+            avoided.append(edge)
+            continue
+        return Plan(route, corridor, tuple(result.roadmaps), result.trajectory,
+                    tuple(blocked), t_route, t_roadmap + result.roadmap_seconds,
+                    t_traj + result.trajectory_seconds)

@@ -1,0 +1,176 @@
+"""Levels 2 and 3 along a whole corridor: segments planned in turn and joined.
+
+The corridor is cut into overlapping segments of ``RoadmapParams.segment_length``. Each
+segment's roadmap and trajectory start from the pose of the previous segment's trajectory at a
+join point half-way into their overlap, so position and heading are continuous there; the speed
+profile then runs once over the joined curve, so speed is continuous too.
+
+Level 2 models the vehicle as a disc of its width; a rectangle's corners reach
+``(vehicle_length - vehicle_width) / 2`` [m] further ahead and behind. So level 2 plans among
+obstacles elongated by that much along the road (:meth:`Obstacles.elongated`, along the
+reference line's heading at each obstacle's centroid); level 3 checks the exact footprint
+against the original obstacles.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from splineplan.corridor import Corridor
+from splineplan.errors import TrajectoryError
+from splineplan.geometry import FloatArray
+from splineplan.obstacles import Obstacles
+from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
+from splineplan.speed import allowed_speed, speed_profile
+from splineplan.trajectory import (
+    IterationStats,
+    Trajectory,
+    TrajectoryParams,
+    _times,
+    plan_trajectory,
+)
+
+log = logging.getLogger(__name__)
+
+#: Overlap [m] of consecutive segments (at most a quarter of the segment length).
+SEGMENT_OVERLAP = 20.0
+
+
+@dataclass(frozen=True, eq=False)
+class CorridorPlan:
+    """Result of :func:`plan_corridor`; unpacks as ``(roadmaps, trajectory)``.
+
+    Attributes
+    ----------
+    roadmaps
+        Level 2's roadmap of each segment.
+    trajectory
+        The joined level-3 trajectory.
+    roadmap_seconds, trajectory_seconds
+        Time [s] spent in level 2 and in level 3, summed over the segments.
+    """
+
+    roadmaps: list[Roadmap]
+    trajectory: Trajectory
+    roadmap_seconds: float
+    trajectory_seconds: float
+
+    def __iter__(self) -> Iterator[Any]:
+        return iter((self.roadmaps, self.trajectory))
+
+
+def plan_corridor(
+    corridor: Corridor,
+    obstacles: Obstacles,
+    start_xy: ArrayLike,
+    start_heading: float | None,
+    *,
+    roadmap_params: RoadmapParams | None = None,
+    params: TrajectoryParams | None = None,
+    start_speed: float = 0.0,
+    end_speed: float | None = 0.0,
+) -> CorridorPlan:
+    """Roadmaps and one continuous trajectory along the whole corridor.
+
+    Parameters
+    ----------
+    corridor, obstacles
+        The route's drivable area and its obstacles.
+    start_xy, start_heading
+        The vehicle's centre ``(2,)`` [m] and heading [rad] (``None``: along the roadmap).
+    roadmap_params, params
+        Level-2 and level-3 parameters.
+    start_speed, end_speed
+        Speeds [m/s] at the start and at the end of the corridor (0 stops there, ``None``
+        keeps going).
+    """
+    rp = roadmap_params or RoadmapParams()
+    tp = params or TrajectoryParams()
+    overlap = min(SEGMENT_OVERLAP, rp.segment_length / 4.0)
+    pieces = corridor.segments(rp.segment_length, overlap) if corridor.length > \
+        rp.segment_length else [corridor]
+    pose = np.asarray(start_xy, dtype=float).reshape(2)
+    heading = start_heading
+    speed = start_speed
+    roadmaps: list[Roadmap] = []
+    parts: list[Trajectory] = []
+    t_roadmap = t_traj = 0.0
+    extra = max(rp.vehicle_length - rp.vehicle_width, 0.0) / 2.0
+    for i, seg in enumerate(pieces):
+        seg_obs = obstacles.near(seg.polygon(), 0.0) if len(obstacles) else obstacles
+        t0 = time.perf_counter()
+        grown = seg_obs
+        if len(seg_obs) and extra > 0:
+            centroids = np.array([p.mean(axis=0) for p in seg_obs.polygons()])
+            grown = seg_obs.elongated(seg.heading_at(seg.to_sl(centroids)[:, 0]), extra)
+        rm = plan_roadmap(seg, grown, pose, rp)
+        t1 = time.perf_counter()
+        tr = plan_trajectory(rm, seg, seg_obs, tp, heading, start_speed=speed,
+                             end_speed=None)
+        t_roadmap += t1 - t0
+        t_traj += time.perf_counter() - t1
+        roadmaps.append(rm)
+        if i + 1 < len(pieces):
+            # join half-way into the overlap with the next piece (stations of the whole route)
+            join = pieces[i + 1].offset + overlap / 2.0 - seg.offset
+            st = seg.to_sl(tr.xy)[:, 0]
+            cut = int(np.searchsorted(st, join))
+            if cut <= 0 or cut >= len(st):
+                raise TrajectoryError(
+                    f"trajectory does not reach the join at station "
+                    f"{seg.offset + join:.1f} m")
+            tr = _head(tr, cut + 1)
+            pose = np.array([tr.x[-1], tr.y[-1]])
+            heading = float(tr.heading[-1])
+            speed = float(tr.speed[-1])
+        parts.append(tr)
+    t2 = time.perf_counter()
+    joined = _join(parts, tp, start_speed, end_speed)
+    t_traj += time.perf_counter() - t2
+    return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
+
+
+def _head(tr: Trajectory, n: int) -> Trajectory:
+    """The first ``n`` samples of a trajectory."""
+    return replace(tr, t=tr.t[:n], x=tr.x[:n], y=tr.y[:n], heading=tr.heading[:n],
+                   speed=tr.speed[:n], curvature=tr.curvature[:n], s=tr.s[:n],
+                   clearance_obstacles=tr.clearance_obstacles[:n],
+                   clearance_road=tr.clearance_road[:n])
+
+
+def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,
+          end_speed: float | None) -> Trajectory:
+    """One trajectory from pieces that each start where the previous one ends."""
+    if len(parts) == 1:
+        tr = parts[0]
+        cat = {name: getattr(tr, name) for name in
+               ("x", "y", "heading", "curvature", "clearance_obstacles", "clearance_road")}
+    else:
+        # drop each later piece's first sample: it repeats the previous piece's last
+        cat = {name: np.concatenate([getattr(p, name)[(1 if j else 0):]
+                                     for j, p in enumerate(parts)])
+               for name in ("x", "y", "heading", "curvature", "clearance_obstacles",
+                            "clearance_road")}
+    xy = np.column_stack((cat["x"], cat["y"]))
+    s: FloatArray = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))))
+    limit = allowed_speed(cat["curvature"], mu=tp.mu, g=tp.g, s_max=tp.s_max)
+    speed = speed_profile(s, limit, a_max=tp.a_max, b_max=tp.b_max,
+                          start_speed=start_speed, end_speed=end_speed)
+    stats = IterationStats(*(sum(getattr(p.iterations, f) for p in parts)
+                             for f in ("tried", "accepted", "refused", "rounds",
+                                       "refinements", "control_points", "doubled")))
+    return Trajectory(
+        _times(s, speed), cat["x"], cat["y"], cat["heading"], speed, cat["curvature"], s,
+        np.concatenate([p.control_points for p in parts]),
+        parts[0].spline if len(parts) == 1 else None,
+        cat["clearance_obstacles"], cat["clearance_road"],
+        all(p.feasible for p in parts), stats,
+        min(p.min_speed_before for p in parts), min(p.min_speed_after for p in parts),
+        parts[0].safety_margin)

@@ -1,0 +1,314 @@
+"""Level 1, road selection: Dijkstra over the edge graph of a SUMO network.
+
+The paper searches a graph of intersections and roads weighted by length. Here a vertex is
+a SUMO edge and an arc is a connection the vehicle class may use (see
+:mod:`splineplan.network`), so that forbidden turns stay forbidden. Route lengths follow
+sumolib's convention, given in :mod:`splineplan.network`: the first edge from ``start_pos``
+on, every later edge in full, plus the internal (junction) lanes between them.
+
+The search is Dijkstra's with a binary heap that stops at the goal, guided by landmark
+lower bounds (ALT: 16 landmarks per class graph and weight, built on the first query and
+cached); the bounds are exact lower bounds, so the route is still a least-cost one.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import logging
+import weakref
+from collections.abc import Iterable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from splineplan.errors import NoRouteError, ParameterError, VehicleClassError
+from splineplan.geometry import FloatArray
+from splineplan.network import ClassGraph, RoadNetwork
+
+log = logging.getLogger(__name__)
+
+#: What a route may minimise: metres or seconds.
+WEIGHTS = ("length", "time")
+
+
+@dataclass(frozen=True)
+class Route:
+    """A road-level route.
+
+    Attributes
+    ----------
+    edges
+        SUMO edge ids from the origin edge to the destination edge (no internal edges).
+    length
+        Length [m] from ``start_pos`` on the first edge to the end of the last edge,
+        including the junction lanes between edges (sumolib's convention).
+    cost
+        What was minimised: ``length`` [m] or travel time [s] at the speed limits.
+    weight
+        ``"length"`` or ``"time"``.
+    vclass
+        The vehicle class the route is for.
+    start_pos
+        Position [m] on the first edge the route starts at.
+    """
+
+    edges: tuple[str, ...]
+    length: float
+    cost: float
+    weight: str
+    vclass: str
+    start_pos: float = 0.0
+
+    @property
+    def origin(self) -> str:
+        """The first edge."""
+        return self.edges[0]
+
+    @property
+    def destination(self) -> str:
+        """The last edge."""
+        return self.edges[-1]
+
+
+def shortest_route(
+    network: RoadNetwork,
+    from_edge: str,
+    to_edge: str,
+    *,
+    vclass: str = "passenger",
+    weight: str = "length",
+    avoid: Iterable[str] = (),
+    start_pos: float = 0.0,
+) -> Route:
+    """The least-cost route from ``from_edge`` to ``to_edge`` for vehicle class ``vclass``.
+
+    Parameters
+    ----------
+    network
+        The road network.
+    from_edge, to_edge
+        Origin and destination edge ids (normal edges).
+    vclass
+        SUMO vehicle class.
+    weight
+        ``"length"`` minimises metres, ``"time"`` travel time at the speed limits [s].
+    avoid
+        Edge ids the route must not use (e.g. found blocked).
+    start_pos
+        Position [m] along the origin edge, in ``[0, length]``; the route's length and
+        cost count from there.
+
+    Raises
+    ------
+    UnknownEdgeError
+        An edge id (origin, destination or in ``avoid``) is not in the network.
+    VehicleClassError
+        ``vclass`` is unknown, or may not use the origin or destination edge.
+    ParameterError
+        ``weight`` or ``start_pos`` is out of range.
+    NoRouteError
+        No route leads from origin to destination (also when either is avoided).
+    """
+    if weight not in WEIGHTS:
+        raise ParameterError(f"weight must be one of {', '.join(WEIGHTS)}, got {weight!r}")
+    graph = network.graph(vclass)  # checks vclass
+    src = network.edge_index(from_edge)
+    dst = network.edge_index(to_edge)
+    blocked = {network.edge_index(e) for e in avoid}
+    for name, i in (("origin", src), ("destination", dst)):
+        if not graph.usable[i]:
+            raise VehicleClassError(
+                f"vehicle class '{vclass}' may not use {name} edge '{network.edge_ids[i]}'")
+    first_len = float(network.lengths[src])
+    start_pos = float(start_pos)
+    if not 0.0 <= start_pos <= first_len:
+        raise ParameterError(
+            f"start_pos {start_pos:g} m is outside edge '{from_edge}' [0, {first_len:g}] m")
+    for name, i in (("origin", src), ("destination", dst)):
+        if i in blocked:
+            raise NoRouteError(f"no route from edge '{from_edge}' to edge '{to_edge}': "
+                               f"the {name} edge '{network.edge_ids[i]}' is to be avoided")
+
+    search = _search(network, graph, weight)
+    path = dijkstra(search.adjacency, src, dst, blocked, search.potential(src, dst))
+    if path is None:
+        msg = (f"no route from edge '{from_edge}' to edge '{to_edge}' "
+               f"for vehicle class '{vclass}'")
+        if blocked:
+            names = sorted(network.edge_ids[i] for i in blocked)
+            shown = ", ".join(names[:10]) + (", ..." if len(names) > 10 else "")
+            msg += f" avoiding {len(names)} edge(s): {shown}"
+        raise NoRouteError(msg)
+
+    length, time = _path_totals(network, graph, path)
+    length -= start_pos
+    time -= start_pos / float(network.speeds[src])
+    cost = length if weight == "length" else time
+    edges = tuple(network.edge_ids[i] for i in path)
+    log.debug("route %s -> %s: %d edges, %.1f m", from_edge, to_edge, len(edges), length)
+    return Route(edges=edges, length=length, cost=cost, weight=weight, vclass=vclass,
+                 start_pos=start_pos)
+
+
+def dijkstra(
+    adjacency: list[list[tuple[int, float]]],
+    source: int,
+    target: int,
+    blocked: Iterable[int] = (),
+    potential: list[float] | None = None,
+) -> list[int] | None:
+    """Least-cost vertex path from ``source`` to ``target``, or ``None`` if there is none.
+
+    Dijkstra's algorithm with a binary heap, stopping when ``target`` is settled.
+    ``adjacency[u]`` lists ``(v, cost)`` pairs with cost >= 0; vertices in ``blocked`` are
+    never entered. ``potential``, if given, is a consistent lower bound of each vertex's
+    cost to ``target`` (values >= ``UNREACHABLE`` mean it cannot reach it); the search
+    then orders its heap by cost + potential (A*), which settles fewer vertices and finds
+    a path of the same least cost.
+    """
+    if source == target:
+        return [source]
+    n = len(adjacency)
+    h = potential if potential is not None else [0.0] * n
+    if h[source] >= UNREACHABLE:
+        return None
+    inf = float("inf")
+    dist = [inf] * n
+    pred = [-1] * n
+    done = bytearray(n)
+    for b in blocked:
+        done[b] = 1
+    dist[source] = 0.0
+    heap = [(h[source], source)]
+    pop, push = heapq.heappop, heapq.heappush
+    while heap:
+        _, u = pop(heap)
+        if done[u]:
+            continue
+        if u == target:
+            path = [u]
+            while pred[u] >= 0:
+                u = pred[u]
+                path.append(u)
+            path.reverse()
+            return path
+        done[u] = 1
+        d = dist[u]
+        for v, c in adjacency[u]:
+            nd = d + c
+            if nd < dist[v] and not done[v]:
+                hv = h[v]
+                if hv >= UNREACHABLE:
+                    continue
+                dist[v] = nd
+                pred[v] = u
+                push(heap, (nd + hv, v))
+    return None
+
+
+#: Potentials at or above this value mark vertices that cannot reach the target.
+UNREACHABLE = 1e14
+#: Number of landmarks per graph and weight, and how many of them one query uses.
+N_LANDMARKS = 16
+N_ACTIVE = 3
+
+
+@dataclass(frozen=True, eq=False)
+class _Search:
+    """What queries on one class graph and weight share: arc lists and landmark distances.
+
+    ``to_landmark[i, v]`` is the least cost from ``v`` to landmark ``i``;
+    ``from_landmark[i, v]`` from landmark ``i`` to ``v`` (``_BIG`` where there is no path).
+    """
+
+    adjacency: list[list[tuple[int, float]]]
+    from_landmark: FloatArray
+    to_landmark: FloatArray
+
+    def potential(self, source: int, target: int) -> list[float]:
+        """Landmark lower bounds (ALT) of every vertex's cost to ``target``."""
+        df, dt = self.from_landmark, self.to_landmark
+        score = np.maximum(df[:, target] - df[:, source], dt[:, source] - dt[:, target])
+        use = np.argsort(-score)[:N_ACTIVE]
+        d1, d2 = df[use], dt[use]
+        h = np.maximum((d1[:, target, None] - d1).max(axis=0),
+                       (d2 - d2[:, target, None]).max(axis=0))
+        return list(np.maximum(h, 0.0).tolist())
+
+
+_BIG = 1e15
+_SEARCHES: weakref.WeakKeyDictionary[ClassGraph, dict[str, _Search]] = (
+    weakref.WeakKeyDictionary())
+
+
+def _search(network: RoadNetwork, graph: ClassGraph, weight: str) -> _Search:
+    """The shared search data of ``graph`` for ``weight`` (built on first use, cached)."""
+    per_graph = _SEARCHES.setdefault(graph, {})
+    found = per_graph.get(weight)
+    if found is None:
+        found = _build_search(_arc_costs(network, graph, weight), graph)
+        per_graph[weight] = found
+    return found
+
+
+def _arc_costs(network: RoadNetwork, graph: ClassGraph, weight: str) -> FloatArray:
+    """Cost of each arc: the internal lanes plus the edge entered, [m] or [s]."""
+    to = graph.indices
+    if weight == "length":
+        return np.asarray(graph.via_length + network.lengths[to])
+    return np.asarray(graph.via_time + network.lengths[to] / network.speeds[to])
+
+
+def _build_search(cost: FloatArray, graph: ClassGraph, *, seed: int = 0) -> _Search:
+    """Arc lists and landmarks, chosen farthest-first from a seeded random vertex."""
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import dijkstra as sp_dijkstra
+
+    n = len(graph.indptr) - 1
+    ind, cst, ptr = graph.indices.tolist(), cost.tolist(), graph.indptr.tolist()
+    adjacency = [list(zip(ind[a:b], cst[a:b], strict=True))
+                 for a, b in itertools.pairwise(ptr)]
+    # scipy drops explicit zeros; costs here are > 0 (edges have positive length)
+    fwd = csr_matrix((np.maximum(cost, 1e-12), graph.indices, graph.indptr), shape=(n, n))
+    bwd = fwd.T.tocsr()
+    k = min(N_LANDMARKS, n)
+    rng = np.random.default_rng(seed)
+    chosen: list[int] = []
+    nearest = np.full(n, np.inf)
+    cur = int(rng.integers(n))
+    for _ in range(k):
+        chosen.append(cur)
+        d = np.minimum(sp_dijkstra(fwd, indices=cur), sp_dijkstra(bwd, indices=cur))
+        nearest = np.minimum(nearest, d)
+        score = np.where(np.isfinite(nearest), nearest, -1.0)
+        score[chosen] = -2.0
+        cur = int(np.argmax(score))
+    df = np.atleast_2d(sp_dijkstra(fwd, indices=chosen))
+    dt = np.atleast_2d(sp_dijkstra(bwd, indices=chosen))
+    df[~np.isfinite(df)] = _BIG
+    dt[~np.isfinite(dt)] = _BIG
+    log.debug("landmarks %s", chosen)
+    return _Search(adjacency, df, dt)
+
+
+def _path_totals(network: RoadNetwork, graph: ClassGraph, path: list[int]) -> tuple[float, float]:
+    """Length [m] and travel time [s] of a vertex path, the first edge in full."""
+    lists = _LISTS.get(graph)
+    if lists is None:
+        lists = (graph.indptr.tolist(), graph.indices.tolist(), graph.via_length.tolist(),
+                 graph.via_time.tolist(), network.lengths.tolist(), network.speeds.tolist())
+        _LISTS[graph] = lists
+    ptr, ind, vlen, vtime, lengths, speeds = lists
+    length = lengths[path[0]]
+    time = length / speeds[path[0]]
+    for u, v in itertools.pairwise(path):
+        k = ind.index(v, ptr[u], ptr[u + 1])
+        length += vlen[k] + lengths[v]
+        time += vtime[k] + lengths[v] / speeds[v]
+    return length, time
+
+
+_LISTS: weakref.WeakKeyDictionary[ClassGraph, tuple[list[Any], ...]] = (
+    weakref.WeakKeyDictionary())

@@ -1,0 +1,1277 @@
+"""Closed loop in SUMO: the planner drives an ego vehicle among SUMO's own traffic.
+
+This is the only module that imports ``libsumo`` (and ``traci``, for ``gui=True``). Each step
+of a headless SUMO run:
+
+1. read the vehicles around the ego (one context subscription): stopped or parked vehicles,
+   and polygons of type ``obstacle``, within the look-ahead along the route are obstacles;
+2. replan (levels 2 and 3 on a window of the route's corridor, ``lookahead`` metres long)
+   when the window runs short, when the set of obstacles ahead changes, when SUMO put the ego
+   off the plan, and at level 1 with the blocked edge avoided when level 2 finds the road
+   closed;
+3. advance along the trajectory at its speed, slowed to keep a time gap to whatever is in
+   the ego's path (moving vehicles are handled by speed) and to stop at red lights;
+4. move the ego with ``vehicle.moveToXY(..., keepRoute=3)``: SUMO's position is the middle
+   of the front bumper and its angle is in degrees, 0 = north, clockwise; ``keepRoute=3``
+   keeps the exact x, y (bit 2) and maps the vehicle onto its route only (bit 1), which is
+   kept equal to the planned route with ``vehicle.setRoute``;
+5. check that SUMO put the ego where asked, and check the ego's footprint against every
+   other vehicle's footprint and against the road (SUMO's own collision check runs too, with
+   ``--collision.action warn``; nothing is teleported: ``--time-to-teleport -1``).
+
+Outputs in ``out_dir``: ``metrics.json``, ``trajectory.csv`` (the driven path), ``fcd.xml``
+(SUMO's floating car data), ``sumo.log``, and with ``plot=True`` pictures. A run that fails
+midway writes all it has recorded, says why in ``metrics.json`` and raises
+:class:`~splineplan.errors.SimulationError`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import json
+import logging
+import math
+import sys
+import time
+import xml.etree.ElementTree as ET
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from splineplan.corridor import Corridor
+from splineplan.errors import (
+    GeometryError,
+    NoRouteError,
+    ParameterError,
+    RoadBlockedError,
+    ScenarioError,
+    SimulationError,
+    SplineplanError,
+    TrajectoryError,
+    VehicleClassError,
+)
+from splineplan.geometry import FloatArray, heading_from_sumo_angle, sumo_angle_from_heading
+from splineplan.metrics import (
+    box_distances,
+    dynamics,
+    finite_or_none,
+    footprint,
+    footprints,
+    summary_stats,
+)
+from splineplan.obstacles import Obstacles
+from splineplan.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+#: ``moveToXY`` keepRoute: bit 1 maps onto the vehicle's route only, bit 2 keeps the exact x, y.
+KEEP_ROUTE = 3
+#: Lateral slack [m] beyond the ego's half width within which a vehicle counts as in its path.
+PATH_MARGIN = 0.15
+#: How far [m] a footprint point may stick out of the lane bands and junction areas before it
+#: counts as off the road (lane bands are a model of the drawn road: curbs at junction corners
+#: are cut by a few centimetres).
+OFF_ROAD_TOLERANCE = 0.1
+#: Radius [m] of the neighbourhood whose lane segments the road check keeps at hand.
+_ROAD_CACHE = 20.0
+#: Spacing [m] of the path samples used to find vehicles in the ego's path.
+_PATH_SPACING = 0.5
+#: Seconds between retries when no plan could be made.
+_RETRY_AFTER = 1.0
+#: Offsets (fractions of d) of the sweep lines tried before a road counts as blocked.
+_SWEEP_PHASES = (0.0, 0.5, 0.25, 0.75)
+#: Straight extension [m] of the path beyond the trajectory's end, to see what is in the way.
+_PATH_EXTENSION = 60.0
+#: Re-routes tried in one replan before giving up.
+_MAX_REROUTES = 5
+
+Driver = Literal["planner", "sumo"]
+
+
+@dataclass(frozen=True)
+class Replan:
+    """One planning call of the closed loop.
+
+    Attributes
+    ----------
+    time
+        Simulation time [s].
+    reason
+        ``start``, ``horizon`` (the window ran short), ``obstacles`` (new obstacles ahead),
+        ``deviation`` (SUMO put the ego off the plan), ``reroute`` (level 1 after level 2
+        found the road closed) or ``retry`` (after a failed plan).
+    planning_time
+        Wall time [s] of the planning (levels 1 to 3 as needed).
+    station
+        The ego's station [m] on the route at that time.
+    ok
+        Whether a trajectory came out.
+    detail
+        What triggered it or what failed.
+    """
+
+    time: float
+    reason: str
+    planning_time: float
+    station: float
+    ok: bool = True
+    detail: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class SimResult:
+    """Outcome of :func:`simulate`.
+
+    Attributes
+    ----------
+    status
+        ``arrived``, ``timeout`` (duration reached) or ``failed``.
+    reason
+        Why the run stopped, in words.
+    out_dir
+        Where the outputs are.
+    metrics
+        What ``metrics.json`` holds.
+    replans
+        Every planning call.
+    route
+        The last planned route's edges.
+    driven
+        Columns of ``trajectory.csv``, as arrays.
+    plans
+        ``(time, roadmaps, trajectory, corridor window)`` of each successful plan (for plots).
+    """
+
+    status: str
+    reason: str
+    out_dir: Path
+    metrics: dict[str, Any]
+    replans: tuple[Replan, ...]
+    route: tuple[str, ...]
+    driven: dict[str, np.ndarray]
+    plans: tuple[Any, ...] = field(default=(), repr=False)
+
+    @property
+    def arrived(self) -> bool:
+        """Whether the ego reached its goal."""
+        return self.status == "arrived"
+
+
+# ---- public entry -------------------------------------------------------------------------
+
+def simulate(
+    scenario: Scenario,
+    *,
+    out_dir: str | Path,
+    plot: bool = False,
+    gui: bool = False,
+    seed: int | None = None,
+    progress: bool | None = None,
+    on_step: Callable[[float], None] | None = None,
+    driver: Driver = "planner",
+) -> SimResult:
+    """Run a scenario in SUMO with the planner driving the ego vehicle.
+
+    Parameters
+    ----------
+    scenario
+        The experiment (:func:`splineplan.scenario.load_scenario`).
+    out_dir
+        Folder for the outputs (created).
+    plot
+        Also draw the route on the network and each plan's roadmap and trajectory.
+    gui
+        Run ``sumo-gui`` through ``traci`` instead of headless ``libsumo``.
+    seed
+        SUMO's random seed; default the scenario's.
+    progress
+        Show a progress bar on stderr; default: when stderr is a terminal.
+    on_step
+        Called with the simulation time [s] after every step (a hook for tests and tools).
+    driver
+        ``"planner"``, or ``"sumo"`` to let SUMO's own driver model drive the ego along the
+        same level-1 route (the benchmark's baseline).
+
+    Raises
+    ------
+    ScenarioError, UnknownEdgeError, VehicleClassError, NoRouteError
+        Bad input (missing file, unknown edge, an edge the ego's class may not use).
+    SimulationError
+        SUMO failed to start or to step, or the ego left the simulation unplanned.
+    """
+    if seed is not None:
+        scenario = scenario.with_seed(seed)
+    if driver not in ("planner", "sumo"):
+        raise ParameterError(f"driver must be 'planner' or 'sumo', not {driver!r}")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    run = _Run(scenario, out, driver=driver, gui=gui, on_step=on_step,
+               progress=_want_progress(progress))
+    try:
+        run.setup()
+        run.loop()
+    except SplineplanError as err:
+        run.fail(err)
+        run.finish(plot=plot)
+        if isinstance(err, SimulationError):
+            raise
+        if run.sumo_started:
+            raise SimulationError(f"{scenario.name}: {err}") from err
+        raise
+    except Exception as err:  # SUMO's exceptions and anything unforeseen: keep what we have
+        run.fail(err)
+        run.finish(plot=plot)
+        raise SimulationError(f"{scenario.name}: simulation stopped at "
+                              f"t={run.time:.1f} s: {_sumo_message(err)}") from err
+    return run.finish(plot=plot)
+
+
+def stopped_vehicle_obstacles(
+    sumo: Any, vehicle_ids: Any = None, *, stopped_speed: float = 0.1
+) -> Obstacles:
+    """Obstacles of the stopped or parked vehicles of a running SUMO simulation.
+
+    Each is the oriented rectangle of the vehicle: SUMO's position (the middle of the front
+    bumper), angle (degrees, 0 = north, clockwise), length and width. A vehicle counts as
+    stopped when it is at a stop or parked and slower than ``stopped_speed`` [m/s].
+
+    Parameters
+    ----------
+    sumo
+        The ``libsumo`` (or ``traci``) module, with a simulation running.
+    vehicle_ids
+        Vehicles to look at; default every vehicle in the simulation.
+    """
+    ids = list(sumo.vehicle.getIDList() if vehicle_ids is None else vehicle_ids)
+    keep = [v for v in ids
+            if sumo.vehicle.getStopState(v) & 3 and sumo.vehicle.getSpeed(v) < stopped_speed]
+    if not keep:
+        return Obstacles.empty()
+    fronts = np.array([sumo.vehicle.getPosition(v) for v in keep], dtype=float)
+    heads = heading_from_sumo_angle([sumo.vehicle.getAngle(v) for v in keep])
+    lens = np.array([sumo.vehicle.getLength(v) for v in keep], dtype=float)
+    wids = np.array([sumo.vehicle.getWidth(v) for v in keep], dtype=float)
+    return Obstacles.from_boxes(fronts, heads, lens, wids, reference="front", ids=keep)
+
+
+# ---- the run ------------------------------------------------------------------------------
+
+class _Run:
+    """State of one closed-loop run (internal)."""
+
+    def __init__(self, scenario: Scenario, out: Path, *, driver: Driver, gui: bool,
+                 on_step: Callable[[float], None] | None, progress: bool) -> None:
+        self.sc = scenario
+        self.out = out
+        self.driver = driver
+        self.gui = gui
+        self.on_step = on_step
+        self.progress = progress
+        self.ego = scenario.ego.id
+        self.dt = scenario.sim.step_length
+        self.time = 0.0
+        self.status = "running"
+        self.reason = ""
+        self.sumo_started = False
+        self.sumo: Any = None
+        self.rows: list[tuple[Any, ...]] = []
+        self.replans: list[Replan] = []
+        self.plans: list[Any] = []
+        self.collisions: list[dict[str, Any]] = []
+        self.sumo_collisions: list[dict[str, Any]] = []
+        self.position_errors: list[float] = []
+        self.avoid: set[str] = set()
+        self.route_edges: tuple[str, ...] = ()
+        self.route_length = math.nan
+        self.corridor: Corridor | None = None
+        self.net: Any = None
+        self.in_sim = False
+        self.depart_time: float | None = None
+        self.wall_start = time.perf_counter()
+        self.wall_time = 0.0
+        self.polygons = Obstacles.empty()
+        # motion state
+        self.traj: Any = None
+        self.path_s: FloatArray = np.zeros(0)
+        self.path_xy: FloatArray = np.zeros((0, 2))
+        self.path_heading: FloatArray = np.zeros(0)
+        self.path_speed: FloatArray = np.zeros(0)
+        self.ext_s: FloatArray = np.zeros(0)
+        self.ext_xy: FloatArray = np.zeros((0, 2))
+        self.ext_heading: FloatArray = np.zeros(0)
+        self.u = 0.0  # station [m] along the current trajectory
+        self.v = 0.0  # speed [m/s]
+        self.pose = np.zeros(3)  # centre x, y, heading
+        self.planned_ids: frozenset[str] = frozenset()
+        self.window_end = 0.0
+        self.truncated = False
+        self.stop_at: float | None = None  # station on the trajectory to stop before
+        self.retry_at: float | None = None
+        self.goal_station = math.nan
+        self.last_lane = ""
+
+    # -- setup ----------------------------------------------------------------------------
+    def setup(self) -> None:
+        from splineplan.network import load_network, route_corridor
+        from splineplan.route import shortest_route
+
+        sc, ego = self.sc, self.sc.ego
+        for p in (sc.network, *sc.routes, *sc.additional):
+            if not Path(p).is_file():
+                raise ScenarioError(f"{sc.name}: file not found: {p}")
+        self.net = load_network(sc.network)
+        self.net.edge_index(ego.start_edge)
+        self.net.edge_index(ego.goal_edge)
+        lanes = self.net.lanes_of(ego.start_edge)
+        if ego.start_lane >= len(lanes):
+            raise ScenarioError(f"{sc.name}: ego.start_lane {ego.start_lane} does not exist on "
+                                f"edge '{ego.start_edge}' ({len(lanes)} lanes)")
+        if not lanes[ego.start_lane].allows(ego.vclass):
+            raise VehicleClassError(f"vehicle class '{ego.vclass}' may not use lane "
+                                    f"{ego.start_lane} of start edge '{ego.start_edge}'")
+        if ego.start_pos < ego.length:
+            raise ScenarioError(f"{sc.name}: ego.start_pos ({ego.start_pos} m) must be at least "
+                                f"the ego's length ({ego.length} m): the position is the front "
+                                "bumper's")
+        route = shortest_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
+                               start_pos=ego.start_pos)
+        goal_len = self.net.length_of(ego.goal_edge)
+        if ego.goal_pos is not None and ego.goal_pos > goal_len:
+            raise ScenarioError(f"{sc.name}: ego.goal_pos {ego.goal_pos} m is beyond the end of "
+                                f"goal edge '{ego.goal_edge}' ({goal_len:.1f} m)")
+        self._set_route(route_corridor(self.net, route, vclass=ego.vclass), route.edges)
+        self.road = _RoadCheck(self.net, ego.vclass)
+        self.route_length = route.length
+        for p in (*sc.routes, *sc.additional):
+            _check_xml(Path(p))
+        self._start_sumo()
+        self._add_ego()
+
+    def _set_route(self, corridor: Corridor, edges: tuple[str, ...]) -> None:
+        ego = self.sc.ego
+        self.corridor = corridor
+        self.route_edges = tuple(edges)
+        i = len(edges) - 1
+        goal_len = self.net.length_of(ego.goal_edge)
+        goal_pos = ego.goal_pos if ego.goal_pos is not None else max(
+            goal_len - self.sc.sim.goal_margin, 0.0)
+        # the goal edge's stretch on the corridor: scale SUMO's lane position onto it
+        start = float(corridor.edge_starts[i])
+        stretch = corridor.length - start
+        front = start + goal_pos * (stretch / goal_len if goal_len > 0 else 1.0)
+        self.goal_station = front - ego.length / 2.0
+
+    def _start_sumo(self) -> None:
+        sc = self.sc
+        if self.gui:
+            import traci as sumo_mod
+
+            binary = "sumo-gui"
+        else:
+            import libsumo as sumo_mod
+
+            binary = "sumo"
+        try:
+            import sumolib
+
+            binary = sumolib.checkBinary(binary)
+        except Exception:
+            pass
+        cmd = [binary, "-n", str(sc.network),
+               "--step-length", f"{self.dt:g}", "--seed", str(sc.sim.seed),
+               "--collision.action", "warn", "--collision.check-junctions", "true",
+               "--time-to-teleport", "-1", "--lateral-resolution", "0.4",
+               "--fcd-output", str(self.out / "fcd.xml"),
+               "--log", str(self.out / "sumo.log"),
+               "--no-step-log", "true", "--duration-log.disable", "true"]
+        if sc.routes:
+            cmd += ["-r", ",".join(str(p) for p in sc.routes)]
+        if sc.additional:
+            cmd += ["-a", ",".join(str(p) for p in sc.additional)]
+        if self.gui:
+            cmd += ["--start", "--quit-on-end"]
+        self.sumo = sumo_mod
+        try:
+            sumo_mod.start(cmd)
+        except Exception as err:
+            _safe_close(sumo_mod)
+            log_text = _tail(self.out / "sumo.log")
+            raise SimulationError(
+                f"SUMO failed to start for scenario '{sc.name}': {_sumo_message(err)}"
+                + (f"; SUMO says: {log_text}" if log_text else "")) from err
+        self.sumo_started = True
+        self.polygons = self._read_polygons()
+        self.road.add_junctions(self._junction_shapes())
+
+    def _junction_shapes(self) -> list[FloatArray]:
+        s = self.sumo
+        shapes = []
+        for jid in s.junction.getIDList():
+            if jid.startswith(":"):
+                continue
+            shape = np.asarray(s.junction.getShape(jid), dtype=float)
+            if len(shape) >= 3:
+                shapes.append(shape)
+        return shapes
+
+    def _read_polygons(self) -> Obstacles:
+        s = self.sumo
+        polys, ids = [], []
+        for pid in s.polygon.getIDList():
+            if s.polygon.getType(pid).lower().startswith("obstacle"):
+                shape = np.asarray(s.polygon.getShape(pid), dtype=float)
+                if len(shape) >= 3:
+                    polys.append(shape)
+                    ids.append(f"polygon:{pid}")
+        return Obstacles.from_polygons(polys, ids) if polys else Obstacles.empty()
+
+    def _add_ego(self) -> None:
+        s, ego = self.sumo, self.sc.ego
+        vtype = f"{ego.id}_type"
+        s.vehicletype.copy("DEFAULT_VEHTYPE", vtype)
+        s.vehicletype.setLength(vtype, ego.length)
+        s.vehicletype.setWidth(vtype, ego.width)
+        s.vehicletype.setVehicleClass(vtype, ego.vclass)
+        s.vehicletype.setMaxSpeed(vtype, ego.max_speed)
+        s.vehicletype.setColor(vtype, (255, 0, 0, 255))
+        rid = f"{ego.id}_route"
+        s.route.add(rid, list(self.route_edges))
+        s.vehicle.add(ego.id, rid, typeID=vtype, depart=f"{ego.depart:g}",
+                      departPos=f"{ego.start_pos:g}", departLane=str(ego.start_lane),
+                      departSpeed="0")
+
+    # -- main loop --------------------------------------------------------------------------
+    def loop(self) -> None:
+        sc = self.sc
+        bar = _progress_bar(sc.sim.duration, sc.name) if self.progress else None
+        steps = round(sc.sim.duration / self.dt)
+        try:
+            for k in range(steps):
+                if self.in_sim and self.driver == "planner":
+                    self._drive()
+                self._step()
+                if self.on_step is not None:
+                    self.on_step(self.time)
+                if not self.in_sim:
+                    if (self.depart_time is None
+                            and self.ego in self.sumo.simulation.getDepartedIDList()):
+                        self._enter()
+                    continue
+                if self.driver == "sumo":
+                    if self._observe_sumo_driver():
+                        break
+                    continue
+                self._observe()
+                if self.status != "running":
+                    break
+                self._maybe_replan()
+                if bar is not None and k % 10 == 0:
+                    bar.update(10 * self.dt)
+            else:
+                self.status = "timeout"
+                self.reason = (f"duration {sc.sim.duration:g} s reached before the ego arrived"
+                               + (f" ({self.reason})" if self.reason else ""))
+        finally:
+            if bar is not None:
+                bar.close()
+
+    def _step(self) -> None:
+        s = self.sumo
+        try:
+            s.simulationStep()
+        except Exception as err:
+            if self.in_sim and self.ego not in s.vehicle.getIDList():
+                raise SimulationError(
+                    f"ego vehicle '{self.ego}' left the simulation at t={self.time:.1f} s "
+                    "(removed by someone else)") from err
+            raise SimulationError(f"SUMO failed at t={self.time:.1f} s: "
+                                  f"{_sumo_message(err)}") from err
+        self.time = float(s.simulation.getTime())
+        for c in s.simulation.getCollisions():
+            rec = {"time": self.time, "collider": c.collider, "victim": c.victim,
+                   "type": c.type, "lane": c.lane, "pos": c.pos}
+            self.sumo_collisions.append(rec)
+
+    def _enter(self) -> None:
+        """The ego has just been inserted: take over."""
+        s, ego = self.sumo, self.sc.ego
+        self.in_sim = True
+        self.depart_time = self.time
+        if self.driver == "sumo":
+            return
+        c = s.constants
+        rng = self.sc.sim.lookahead + ego.length + 20.0
+        s.vehicle.subscribeContext(self.ego, c.CMD_GET_VEHICLE_VARIABLE, rng,
+                                   [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_LENGTH,
+                                    c.VAR_WIDTH, c.VAR_STOPSTATE])
+        s.vehicle.setSpeedMode(self.ego, 0)
+        s.vehicle.setLaneChangeMode(self.ego, 0)
+        front = np.asarray(s.vehicle.getPosition(self.ego), dtype=float)
+        heading = float(heading_from_sumo_angle(s.vehicle.getAngle(self.ego)))
+        centre = front - ego.length / 2.0 * np.array([math.cos(heading), math.sin(heading)])
+        self.pose = np.array([centre[0], centre[1], heading])
+        self.v = 0.0
+        self._observe()
+        self._replan("start", "")
+
+    # -- observation --------------------------------------------------------------------------
+    def _others(self) -> dict[str, Any]:
+        s = self.sumo
+        res = s.vehicle.getContextSubscriptionResults(self.ego) or {}
+        res.pop(self.ego, None)
+        return res
+
+    def _observe(self) -> None:
+        """Read the world after a step; check where SUMO put the ego; safety checks."""
+        s, ego, sim = self.sumo, self.sc.ego, self.sc.sim
+        c = s.constants
+        try:
+            sumo_front = np.asarray(s.vehicle.getPosition(self.ego), dtype=float)
+            lane = s.vehicle.getLaneID(self.ego)
+        except Exception as err:
+            raise SimulationError(f"ego vehicle '{self.ego}' left the simulation at "
+                                  f"t={self.time:.1f} s (removed by someone else)") from err
+        x, y, h = self.pose
+        want_front = np.array([x, y]) + ego.length / 2.0 * np.array([math.cos(h), math.sin(h)])
+        pos_err = float(np.hypot(*(sumo_front - want_front)))
+        self.position_errors.append(pos_err)
+        self.deviation = pos_err
+        self.last_lane = lane
+        others = self._others()
+        ids = list(others)
+        if ids:
+            fronts = np.array([others[v][c.VAR_POSITION] for v in ids], dtype=float)
+            heads = heading_from_sumo_angle([others[v][c.VAR_ANGLE] for v in ids])
+            lens = np.array([others[v][c.VAR_LENGTH] for v in ids], dtype=float)
+            wids = np.array([others[v][c.VAR_WIDTH] for v in ids], dtype=float)
+            speeds = np.array([others[v][c.VAR_SPEED] for v in ids], dtype=float)
+            stop_state = np.array([others[v][c.VAR_STOPSTATE] for v in ids], dtype=int)
+        else:
+            fronts = np.zeros((0, 2))
+            heads = lens = wids = speeds = np.zeros(0)
+            stop_state = np.zeros(0, dtype=int)
+        stopped = (stop_state & 3) > 0
+        stopped &= speeds < sim.stopped_speed
+        self.others = (ids, fronts, heads, lens, wids, speeds, stopped)
+        # safety: footprint against every other vehicle and obstacle polygon, and the road
+        ego_box = footprint(self.pose[:2], h, ego.length, ego.width)
+        # bounding circles first: the exact distance only where they come within 2 m
+        r_ego = math.hypot(ego.length, ego.width) / 2.0
+        if len(ids):
+            centres = fronts - (lens / 2.0)[:, None] * np.column_stack((np.cos(heads),
+                                                                       np.sin(heads)))
+            rough = (np.hypot(*(centres - self.pose[:2]).T) - r_ego
+                     - np.hypot(lens, wids) / 2.0)
+        else:
+            rough = np.zeros(0)
+        dist = rough.copy()
+        close = np.flatnonzero(rough < 2.0)
+        if len(close):
+            dist[close] = box_distances(ego_box, footprints(
+                fronts[close], heads[close], lens[close], wids[close]))
+        clear_obs = float(dist[stopped].min()) if stopped.any() else math.inf
+        clear_veh = float(dist[~stopped].min()) if (~stopped).any() else math.inf
+        if len(self.polygons):
+            near = self.polygons.near(ego_box, sim.lookahead)
+            if len(near):
+                clear_obs = min(clear_obs, float(near.distance(ego_box).min()))
+        for j in np.flatnonzero(dist <= 0.0):
+            self.collisions.append({"time": self.time, "other": ids[j],
+                                    "other_stopped": bool(stopped[j]), "source": "footprint"})
+        assert self.corridor is not None
+        probe = np.vstack((ego_box, (ego_box + np.roll(ego_box, -1, axis=0)) / 2.0))
+        off_road = not bool(self.road.contains(probe).all())
+        sl = self._project(self.pose[:2])
+        self.station = float(sl[0])
+        self.rows.append((self.time, x, y, h, self.v, self.station, float(sl[1]), lane,
+                          float(sumo_front[0]), float(sumo_front[1]), pos_err, clear_obs,
+                          clear_veh, int(off_road), self.limited))
+        if self.station >= self.goal_station:
+            self.status = "arrived"
+            self.reason = (f"front bumper reached the goal on edge '{ego.goal_edge}' at "
+                           f"t={self.time:.1f} s")
+            _safe_remove(s, self.ego)
+            self.in_sim = False
+
+    def _project(self, xy: FloatArray) -> FloatArray:
+        """Station and lateral offset ``(2,)`` of a point near the last known station.
+
+        A local search along the corridor's reference line (the ego moves a few decimetres a
+        step); a full projection where the local one ends at its window's edge.
+        """
+        c = self.corridor
+        assert c is not None
+        ref, s = c.reference, c.s
+        i0 = int(np.searchsorted(s, self.station))
+        lo, hi = max(i0 - 20, 0), min(i0 + 40, len(ref) - 1)
+        seg_a, seg_b = ref[lo:hi], ref[lo + 1:hi + 1]
+        if len(seg_a) == 0:
+            return np.asarray(c.to_sl(xy[None])[0])
+        ab = seg_b - seg_a
+        ln2 = np.einsum("ij,ij->i", ab, ab)
+        tt = np.clip(np.einsum("ij,ij->i", xy - seg_a, ab) / np.where(ln2 > 0, ln2, 1.0), 0, 1)
+        d = np.hypot(*(seg_a + tt[:, None] * ab - xy).T)
+        k = int(np.argmin(d))
+        if (k == 0 and lo > 0) or (k == len(seg_a) - 1 and hi < len(ref) - 1):
+            return np.asarray(c.to_sl(xy[None])[0])
+        j = lo + k
+        seg_len = float(np.sqrt(ln2[k]))
+        along = float(tt[k]) * seg_len
+        cross = float(ab[k, 0] * (xy[1] - seg_a[k, 1]) - ab[k, 1] * (xy[0] - seg_a[k, 0]))
+        lat = cross / seg_len if seg_len > 0 else 0.0
+        return np.array([s[j] + along, lat])
+
+    limited = 0
+    deviation = 0.0
+    station = 0.0
+    others: tuple[Any, ...] = ([], np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
+                               np.zeros(0), np.zeros(0, dtype=bool))
+
+    def _observe_sumo_driver(self) -> bool:
+        """Baseline: SUMO drives the ego; record its pose. True when it has arrived."""
+        s, ego = self.sumo, self.sc.ego
+        if self.ego in s.simulation.getArrivedIDList():
+            self.status = "arrived"
+            self.reason = f"SUMO's driver arrived at t={self.time:.1f} s"
+            return True
+        try:
+            front = s.vehicle.getPosition(self.ego)
+            angle = s.vehicle.getAngle(self.ego)
+            v = s.vehicle.getSpeed(self.ego)
+        except Exception as err:
+            raise SimulationError(f"ego vehicle '{self.ego}' left the simulation at "
+                                  f"t={self.time:.1f} s") from err
+        h = float(heading_from_sumo_angle(angle))
+        x = front[0] - ego.length / 2.0 * math.cos(h)
+        y = front[1] - ego.length / 2.0 * math.sin(h)
+        self.pose = np.array([x, y, h])
+        self.v = v
+        self.rows.append((self.time, x, y, h, v, math.nan, math.nan, "", front[0], front[1],
+                          0.0, math.inf, math.inf, 0, 0))
+        return False
+
+    # -- obstacles ahead ----------------------------------------------------------------------
+    def _obstacles_ahead(self) -> Obstacles:
+        """Stopped vehicles and obstacle polygons near the route within the look-ahead."""
+        ids, fronts, heads, lens, wids, _, stopped = self.others
+        sim, ego = self.sc.sim, self.sc.ego
+        assert self.corridor is not None
+        obs = Obstacles.empty()
+        if stopped.any():
+            idx = np.flatnonzero(stopped)
+            obs = Obstacles.from_boxes(fronts[idx], heads[idx], lens[idx], wids[idx],
+                                       reference="front", ids=[ids[i] for i in idx])
+        if len(self.polygons):
+            obs = obs + self.polygons
+        if not len(obs):
+            return obs
+        lo = self.station - ego.length - 5.0
+        hi = min(self.station + sim.lookahead, self.corridor.length) + 5.0
+        keep = []
+        for i in range(len(obs)):
+            poly = obs.polygon(i)
+            sl = self.corridor.to_sl(poly)
+            r, lft = self.corridor.bounds_at(np.clip(sl[:, 0], 0.0, self.corridor.length))
+            ahead = (sl[:, 0].max() >= lo) and (sl[:, 0].min() <= hi)
+            lateral = (sl[:, 1].max() >= r.min() - 1.0) and (sl[:, 1].min() <= lft.max() + 1.0)
+            keep.append(bool(ahead and lateral))
+        return obs.subset(np.array(keep, dtype=bool)) if any(keep) else Obstacles.empty()
+
+    # -- planning ----------------------------------------------------------------------------
+    def _maybe_replan(self) -> None:
+        sim = self.sc.sim
+        if self.traj is None or self.retry_at is not None:
+            if self.retry_at is not None and self.time >= self.retry_at:
+                self._replan("retry", self.reason)
+            return
+        if self.deviation > sim.deviation_tolerance:
+            self._set_pose_from_sumo()
+            self._replan("deviation", f"SUMO placed the ego {self.deviation:.2f} m off the plan")
+            return
+        ahead = self._obstacles_ahead()
+        new = set(ahead.ids) - self.planned_ids
+        if new:
+            self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
+                         obstacles=ahead)
+            return
+        assert self.corridor is not None
+        left = self.path_s[-1] - self.u
+        if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
+                left < sim.replan_distance):
+            self._replan("horizon", f"{left:.1f} m of the plan left", obstacles=ahead)
+
+    def _set_pose_from_sumo(self) -> None:
+        s, ego = self.sumo, self.sc.ego
+        front = np.asarray(s.vehicle.getPosition(self.ego), dtype=float)
+        h = float(heading_from_sumo_angle(s.vehicle.getAngle(self.ego)))
+        c = front - ego.length / 2.0 * np.array([math.cos(h), math.sin(h)])
+        self.pose = np.array([c[0], c[1], h])
+
+    def _replan(self, reason: str, detail: str, *, obstacles: Obstacles | None = None) -> None:
+        t0 = time.perf_counter()
+        obstacles = self._obstacles_ahead() if obstacles is None else obstacles
+        ok, msg = self._plan(obstacles)
+        reroutes = 0
+        while not ok and isinstance(msg, RoadBlockedError) and reroutes < _MAX_REROUTES:
+            reroutes += 1
+            done, why = self._reroute(msg)
+            if not done:
+                msg = why
+                break
+            obstacles = self._obstacles_ahead()
+            ok, msg = self._plan(obstacles)
+            if ok:
+                reason = "reroute"
+                detail = why
+        elapsed = time.perf_counter() - t0
+        station = self.station
+        if ok:
+            self.retry_at = None
+            self.stop_at = None
+            self.planned_ids = frozenset(obstacles.ids)
+            self.replans.append(Replan(self.time, reason, elapsed, station, True, detail))
+            log.debug("t=%.1f replan (%s) in %.1f ms", self.time, reason, 1e3 * elapsed)
+            return
+        text = str(msg)
+        self.replans.append(Replan(self.time, reason, elapsed, station, False,
+                                   f"{detail}; failed: {text}" if detail else text))
+        log.info("t=%.1f plan failed: %s", self.time, text)
+        self.reason = f"no plan: {text}"
+        self.retry_at = self.time + _RETRY_AFTER
+        self._brake_before_blockage(msg)
+
+    def _plan(self, obstacles: Obstacles) -> tuple[bool, Any]:
+        """Levels 2 and 3 on the window ahead. Returns (ok, error)."""
+        sc, ego = self.sc, self.sc.ego
+        assert self.corridor is not None
+        s0 = max(self.station - ego.length, 0.0)
+        s1 = self.station + sc.sim.lookahead
+        if len(obstacles):  # reach past every obstacle seen, so a closed road shows at once
+            far = float(self.corridor.to_sl(obstacles.vertices)[:, 0].max())
+            s1 = max(s1, far + ego.length + 2.0 * sc.roadmap.d)
+        s1 = min(s1, self.corridor.length)
+        if s1 - s0 < 2.0 * sc.roadmap.d + ego.length:
+            s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, 0.0)
+        final = s1 >= self.corridor.length - 1e-6
+        blocked: RoadBlockedError | None = None
+        # The sweep lines' phase along the road decides which arcs exist; a road counts as
+        # blocked only if level 2 finds it closed at every phase tried.
+        for phase in _SWEEP_PHASES:
+            try:
+                window = self.corridor.slice(s0 + phase * sc.roadmap.d, s1)
+                roadmaps, traj = _plan_window(
+                    window, obstacles, self.pose[:2], float(self.pose[2]),
+                    roadmap_params=sc.roadmap, params=sc.trajectory,
+                    start_speed=float(self.v), end_speed=0.0 if final else None)
+            except RoadBlockedError as err:
+                if blocked is None or err.station > blocked.station:
+                    blocked = err
+                continue
+            except (TrajectoryError, GeometryError) as err:
+                return False, err
+            bad = np.flatnonzero(np.asarray(traj.clearance_obstacles)
+                                 < sc.roadmap.safety_margin - 1e-6)
+            if len(bad):
+                # drive only the part that keeps clear; stop before the rest, replan on the way
+                keep = float(traj.s[bad[0]]) - sc.roadmap.d
+                if keep < max(2.0 * sc.roadmap.d, 0.5 * float(self.v) ** 2 / (
+                        sc.trajectory.b_max)):
+                    return False, TrajectoryError(
+                        f"trajectory passes {float(np.min(traj.clearance_obstacles)):.2f} m "
+                        f"from an obstacle {float(traj.s[bad[0]]):.1f} m ahead")
+                self._take(traj, s1, usable=keep)
+                self.plans.append((self.time, roadmaps, traj, window, obstacles))
+                return True, None
+            break
+        else:
+            assert blocked is not None
+            if blocked.edge is None:
+                blocked = RoadBlockedError(str(blocked), station=blocked.station,
+                                           edge=self.corridor.edge_at(float(blocked.station)))
+            blocked.station_on_route = float(blocked.station)  # type: ignore[attr-defined]
+            return False, blocked
+        self._take(traj, s1)
+        self.plans.append((self.time, roadmaps, traj, window, obstacles))
+        return True, None
+
+    def _take(self, traj: Any, window_end: float, *, usable: float | None = None) -> None:
+        s = np.asarray(traj.s, dtype=float)
+        self.truncated = usable is not None
+        if usable is not None:  # cut the trajectory: the ego stops at its new end
+            cut = max(int(np.searchsorted(s, usable)), 2)
+            traj = _Cut(s[:cut], np.asarray(traj.x)[:cut], np.asarray(traj.y)[:cut],
+                        np.asarray(traj.heading)[:cut], np.asarray(traj.speed)[:cut])
+            s = traj.s
+        n = max(math.ceil(s[-1] / _PATH_SPACING), 1) + 1
+        u = np.linspace(0.0, s[-1], n)
+        self.path_s = u
+        self.path_xy = np.column_stack((np.interp(u, s, traj.x), np.interp(u, s, traj.y)))
+        self.path_heading = np.interp(u, s, np.unwrap(traj.heading))
+        self.path_speed = np.interp(u, s, traj.speed)
+        ext = np.arange(1, int(_PATH_EXTENSION / _PATH_SPACING) + 1) * _PATH_SPACING
+        h_end = self.path_heading[-1]
+        self.ext_s = u[-1] + ext
+        self.ext_xy = self.path_xy[-1] + ext[:, None] * np.array([math.cos(h_end),
+                                                                  math.sin(h_end)])
+        self.ext_heading = np.full(len(ext), h_end)
+        from scipy.spatial import cKDTree
+
+        self.path_tree = cKDTree(np.concatenate((self.path_xy, self.ext_xy)))
+        self.traj = traj
+        self.u = 0.0
+        # the trajectory starts at the ego's centre: keep u where the ego is
+        d = np.hypot(*(self.path_xy - self.pose[:2]).T)
+        self.u = float(u[int(np.argmin(d[: max(1, int(5.0 / _PATH_SPACING))]))])
+        self.window_end = window_end
+
+    def _reroute(self, err: RoadBlockedError) -> tuple[bool, Any]:
+        """Level 1 again with the blocked edge avoided. Returns (done, detail or error)."""
+        from splineplan.network import route_corridor
+        from splineplan.route import shortest_route
+
+        ego = self.sc.ego
+        assert self.corridor is not None
+        blocked = err.edge
+        here = self.corridor.edge_at(self.station)
+        if blocked is None or blocked == here or blocked in self.avoid:
+            return False, err
+        self.avoid.add(blocked)
+        assert here is not None
+        start = float(self.corridor.edge_starts[self.corridor.edges.index(here)])
+        pos = min(max(self.station - start + ego.length / 2.0, 0.0), self.net.length_of(here))
+        try:
+            route = shortest_route(self.net, here, ego.goal_edge, vclass=ego.vclass,
+                                   avoid=self.avoid, start_pos=pos)
+            corridor = route_corridor(self.net, route, vclass=ego.vclass)
+        except (NoRouteError, GeometryError) as e:
+            return False, RoadBlockedError(f"{err}; no other route: {e}", station=err.station,
+                                           edge=blocked)
+        try:
+            self.sumo.vehicle.setRoute(self.ego, list(route.edges))
+        except Exception as e:
+            return False, SimulationError(f"SUMO refused the new route: {_sumo_message(e)}")
+        old = self.route_edges
+        self._set_route(corridor, route.edges)
+        self.station = float(corridor.to_sl(self.pose[:2])[0, 0])
+        self.route_length = route.length
+        log.info("t=%.1f re-routed around %s", self.time, blocked)
+        return True, (f"edge '{blocked}' blocked; route {' '.join(old)} -> "
+                      f"{' '.join(route.edges)}")
+
+    def _brake_before_blockage(self, err: Any) -> None:
+        """No new plan: keep the old trajectory but stop before the blockage."""
+        if self.traj is None:
+            return
+        st = getattr(err, "station_on_route", None)
+        if st is None:
+            self.stop_at = self.u + 0.5 * self.v * self.v / self.sc.trajectory.b_max
+            return
+        # station on the route -> on the trajectory: offset by where the ego is on both
+        margin = self.sc.ego.length + 2.0 * self.sc.roadmap.d + 2.0
+        self.stop_at = max(self.u + (st - self.station) - margin, self.u)
+
+    # -- driving ------------------------------------------------------------------------------
+    def _drive(self) -> None:
+        """Advance along the trajectory and move the ego in SUMO."""
+        if self.traj is None:
+            self._move()
+            return
+        sc, ego = self.sc, self.sc.ego
+        tp = sc.trajectory
+        dt = self.dt
+        # speed squared is linear in station under constant acceleration: interpolate it
+        u_next = self.u + self.v * dt + 0.5 * tp.a_max * dt * dt
+        v_plan = math.sqrt(float(np.interp(u_next, self.path_s, self.path_speed**2)))
+        v_cap, limited = self._gap_speed()
+        if self.stop_at is not None:
+            v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (self.stop_at - self.u), 0.0)))
+            limited = 1
+        end = float(self.path_s[-1])
+        # stop at the trajectory's end unless a new plan comes first
+        v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (end - self.u), 0.0)))
+        v_target = min(v_plan, v_cap)
+        emergency = 2.0 * tp.b_max
+        v_new = float(np.clip(v_target, self.v - emergency * dt, self.v + tp.a_max * dt))
+        v_new = max(v_new, 0.0)
+        u = min(self.u + 0.5 * (self.v + v_new) * dt, end)
+        if u >= end:
+            v_new = 0.0
+        self.u, self.v = u, v_new
+        self.limited = limited
+        x = float(np.interp(u, self.path_s, self.path_xy[:, 0]))
+        y = float(np.interp(u, self.path_s, self.path_xy[:, 1]))
+        h = float(np.interp(u, self.path_s, self.path_heading))
+        self.pose = np.array([x, y, h])
+        del ego
+        self._move()
+
+    def _move(self) -> None:
+        s, ego = self.sumo, self.sc.ego
+        x, y, h = self.pose
+        fx = x + ego.length / 2.0 * math.cos(h)
+        fy = y + ego.length / 2.0 * math.sin(h)
+        angle = float(sumo_angle_from_heading(h))
+        assert self.corridor is not None
+        edge = self.corridor.edge_at(self.station) or ""
+        lane = _lane_index(self.last_lane)
+        s.vehicle.moveToXY(self.ego, edge, lane, fx, fy, angle, KEEP_ROUTE)
+
+    def _gap_speed(self) -> tuple[float, int]:
+        """Speed cap [m/s] to keep the time gap to whatever is in the path, and red lights."""
+        sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
+        sim = sc.sim
+        cap = math.inf
+        ids, fronts, heads, lens, wids, speeds, _ = self.others
+        ahead = self.path_s >= self.u
+        reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
+        if len(ids):
+            # only vehicles whose bounding circle comes near the path (k-d tree of the path)
+            r_o = np.hypot(lens, wids) / 2.0
+            centres = fronts - (lens / 2.0)[:, None] * np.column_stack((np.cos(heads),
+                                                                       np.sin(heads)))
+            d0, _ = self.path_tree.query(centres, distance_upper_bound=float(
+                r_o.max() + reach + _PATH_SPACING))
+            sel = np.flatnonzero(d0 <= r_o + reach + _PATH_SPACING)
+        if len(ids) and len(sel):
+            ids = [ids[i] for i in sel]
+            fronts, heads, lens, wids, speeds = (fronts[sel], heads[sel], lens[sel], wids[sel],
+                                                 speeds[sel])
+            px = np.concatenate((self.path_xy[ahead], self.ext_xy))
+            ps = np.concatenate((self.path_s[ahead], self.ext_s))
+            ph = np.concatenate((self.path_heading[ahead], self.ext_heading))
+            corners = footprints(fronts, heads, lens, wids)  # (k, 4, 2)
+            centres = corners.mean(axis=1)
+            pts = np.concatenate((corners, centres[:, None, :],
+                                  (corners + np.roll(corners, -1, axis=1)) / 2.0), axis=1)
+            d = np.hypot(pts[:, :, None, 0] - px[None, None, :, 0],
+                         pts[:, :, None, 1] - px[None, None, :, 1])  # (k, 9, m)
+            near = d <= reach
+            hit = near.any(axis=(1, 2))
+            for j in np.flatnonzero(hit):
+                first = int(np.argmax(near[j].any(axis=0)))
+                gap = ps[first] - self.u - ego.length / 2.0
+                rel = float(np.cos(heads[j] - ph[first]))
+                v_l = max(speeds[j] * rel, 0.0)
+                cap = min(cap, _safe_speed(gap - sim.min_gap, v_l, tp.b_max, sim.time_gap))
+        cap = min(cap, self._red_light_speed())
+        return cap, int(np.isfinite(cap))
+
+    def _red_light_speed(self) -> float:
+        tp = self.sc.trajectory
+        try:
+            tls = self.sumo.vehicle.getNextTLS(self.ego)
+        except Exception:
+            return math.inf
+        for _, _, dist, state in tls:
+            if dist > self.sc.sim.lookahead:
+                break
+            if state in "rRyYu":
+                need = self.v * self.v / (2.0 * tp.b_max)
+                if state in "yY" and dist < need:
+                    return math.inf  # cannot stop comfortably: go
+                return math.sqrt(max(2.0 * tp.b_max * (dist - 1.0), 0.0))
+            break
+        return math.inf
+
+    # -- end ----------------------------------------------------------------------------------
+    def fail(self, err: BaseException) -> None:
+        self.status = "failed"
+        self.reason = f"{type(err).__name__}: {_sumo_message(err)}"
+
+    def finish(self, *, plot: bool) -> SimResult:
+        if self.sumo is not None and self.sumo_started:
+            _safe_close(self.sumo)
+            self.sumo_started = False
+        self.wall_time = time.perf_counter() - self.wall_start
+        driven = self._driven()
+        metrics = self._metrics(driven)
+        _write_csv(self.out / "trajectory.csv",
+                   {k: v for k, v in driven.items() if k != "lane"})
+        with (self.out / "metrics.json").open("w") as fh:
+            json.dump(_jsonable(metrics), fh, indent=2, allow_nan=False)
+        result = SimResult(self.status, self.reason, self.out, metrics, tuple(self.replans),
+                           self.route_edges, driven, tuple(self.plans))
+        if plot:
+            try:
+                _plot(self, result)
+            except Exception as err:
+                log.warning("plots failed: %s", err)
+        return result
+
+    def _driven(self) -> dict[str, np.ndarray]:
+        names = ("t", "x", "y", "heading", "speed", "station", "lateral", "lane", "sumo_x",
+                 "sumo_y", "position_error", "clearance_obstacles", "clearance_vehicles",
+                 "off_road", "speed_limited")
+        cols: dict[str, np.ndarray] = {}
+        for i, name in enumerate(names):
+            vals = [r[i] for r in self.rows]
+            cols[name] = np.array(vals, dtype=object if name == "lane" else float)
+        dyn = dynamics(cols["t"], cols["heading"], cols["speed"])
+        cols.update(dyn)
+        return cols
+
+    def _metrics(self, d: dict[str, np.ndarray]) -> dict[str, Any]:
+        sc = self.sc
+        t = d["t"]
+        xy = np.column_stack((d["x"], d["y"])) if len(t) else np.zeros((0, 2))
+        dist = float(np.hypot(*np.diff(xy, axis=0).T).sum()) if len(t) > 1 else 0.0
+        ego_coll = [c for c in self.sumo_collisions
+                    if self.ego in (c["collider"], c["victim"])]
+        plan_times = [r.planning_time for r in self.replans]
+        off = d["off_road"].astype(bool) if len(t) else np.zeros(0, dtype=bool)
+        travel = (t[-1] - self.depart_time) if (len(t) and self.depart_time is not None) else None
+        return {
+            "scenario": sc.name,
+            "scenario_file": str(sc.path) if sc.path else None,
+            "driver": self.driver,
+            "status": self.status,
+            "arrived": self.status == "arrived",
+            "reason": self.reason,
+            "seed": sc.sim.seed,
+            "step_length": self.dt,
+            "sim_time_end": self.time,
+            "depart_time": self.depart_time,
+            "travel_time": travel,
+            "distance": dist,
+            "route": list(self.route_edges),
+            "route_length": finite_or_none(self.route_length),
+            "avoided_edges": sorted(self.avoid),
+            "safety_margin": sc.roadmap.safety_margin,
+            "min_clearance_obstacles": finite_or_none(
+                float(d["clearance_obstacles"].min()) if len(t) else math.inf),
+            "min_clearance_vehicles": finite_or_none(
+                float(d["clearance_vehicles"].min()) if len(t) else math.inf),
+            # our own check: the ego's rectangle overlaps another vehicle's rectangle
+            "collisions": len(self.collisions),
+            "collision_events": self.collisions[:100],
+            # SUMO's reports: lane-based, so a remote-controlled ego passing a vehicle on the
+            # same lane with a lateral offset is reported too; recorded, not counted
+            "sumo_collision_reports": len(ego_coll),
+            "sumo_collision_reports_list": ego_coll[:100],
+            "sumo_collisions_others": len(self.sumo_collisions) - len(ego_coll),
+            "time_off_road": float(off.sum() * self.dt),
+            "off_road_tolerance": OFF_ROAD_TOLERANCE,
+            "max_speed": float(d["speed"].max()) if len(t) else None,
+            "max_lateral_acceleration": float(np.abs(d["a_lat"]).max()) if len(t) else None,
+            "max_longitudinal_acceleration": float(np.abs(d["a_lon"]).max()) if len(t) else None,
+            "max_jerk": float(d["jerk"].max()) if len(t) else None,
+            "replans": [r.__dict__ for r in self.replans],
+            "replan_count": len(self.replans),
+            "planning_time": summary_stats(plan_times),
+            "position_error_max": (float(max(self.position_errors))
+                                   if self.position_errors else None),
+            "wall_time": self.wall_time,
+        }
+
+
+# ---- helpers ------------------------------------------------------------------------------
+
+class _RoadCheck:
+    """Whether points lie on a lane (normal or junction) that a vehicle class may use."""
+
+    def __init__(self, net: Any, vclass: str, tol: float = OFF_ROAD_TOLERANCE) -> None:
+        from scipy.spatial import cKDTree
+
+        lanes = [ln for edge in net.lanes for ln in edge if ln.allows(vclass)]
+        lanes += [ln for ln in net.internal_lanes.values() if ln.allows(vclass)]
+        a, b, hw = [], [], []
+        for ln in lanes:
+            sh = np.asarray(ln.shape, dtype=float)
+            if len(sh) < 2:
+                continue
+            a.append(sh[:-1])
+            b.append(sh[1:])
+            hw.append(np.full(len(sh) - 1, ln.width / 2.0))
+        self.a = np.concatenate(a) if a else np.zeros((0, 2))
+        self.b = np.concatenate(b) if b else np.zeros((0, 2))
+        self.hw = np.concatenate(hw) if hw else np.zeros(0)
+        self.tol = tol
+        mid = (self.a + self.b) / 2.0
+        half = np.hypot(*(self.b - self.a).T) / 2.0 if len(self.a) else np.zeros(0)
+        self.radius = float(half.max() + self.hw.max() + tol) if len(self.a) else 0.0
+        self.tree = cKDTree(mid if len(mid) else np.zeros((1, 2)))
+        self.junctions = Obstacles.empty()
+        self._cache_at: FloatArray | None = None
+        self._cache = np.zeros(0, dtype=np.int64)
+
+    def add_junctions(self, shapes: list[FloatArray]) -> None:
+        """Junction areas (SUMO's junction polygons) count as road too."""
+        good = []
+        for sh in shapes:
+            p = np.asarray(sh, dtype=float)
+            area2 = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
+            if abs(area2) > 1e-9:
+                good.append(p)
+        self.junctions = Obstacles.from_polygons(good) if good else Obstacles.empty()
+
+    def contains(self, points: FloatArray) -> np.ndarray:
+        """``(n,)`` booleans: the point is within a lane's half width of its centre line."""
+        from splineplan.geometry import point_segment_distance
+
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        if not len(self.a):
+            return np.zeros(len(pts), dtype=bool)
+        centre = pts.mean(axis=0)
+        spread = float(np.hypot(*(pts - centre).T).max())
+        if (self._cache_at is None or spread > _ROAD_CACHE / 2.0
+                or float(np.hypot(*(centre - self._cache_at))) > _ROAD_CACHE / 2.0):
+            # segments that can reach any point within _ROAD_CACHE of this centre
+            self._cache_at = centre
+            self._cache = np.asarray(self.tree.query_ball_point(
+                centre, self.radius + _ROAD_CACHE + spread), dtype=np.int64)
+        idx = self._cache
+        if not len(idx):
+            return np.zeros(len(pts), dtype=bool)
+        a, b, hw = self.a[idx], self.b[idx], self.hw[idx]
+        d = point_segment_distance(pts[:, None, :], a[None], b[None])
+        on: np.ndarray = np.asarray(((d - hw[None]) <= self.tol).any(axis=1))
+        if not on.all() and len(self.junctions):
+            near_j = self.junctions.near(pts[~on], 1.0)
+            if len(near_j):
+                on[~on] = near_j.distance(pts[~on]) <= self.tol
+        return np.asarray(on)
+
+
+@dataclass(frozen=True)
+class _Cut:
+    """The drivable start of a trajectory whose end came too near an obstacle."""
+
+    s: FloatArray
+    x: FloatArray
+    y: FloatArray
+    heading: FloatArray
+    speed: FloatArray
+
+
+def _plan_window(window: Corridor, obstacles: Obstacles, start_xy: FloatArray,
+                 start_heading: float, *, roadmap_params: Any, params: Any,
+                 start_speed: float, end_speed: float | None) -> tuple[list[Any], Any]:
+    """Levels 2 and 3 on one planning window (one road segment unless it is longer)."""
+    if window.length > roadmap_params.segment_length:
+        from splineplan.planner import plan_corridor
+
+        roadmaps, traj = plan_corridor(window, obstacles, start_xy, start_heading,
+                                       roadmap_params=roadmap_params, params=params,
+                                       start_speed=start_speed, end_speed=end_speed)
+        return list(roadmaps), traj
+    from splineplan.roadmap import plan_roadmap
+    from splineplan.trajectory import plan_trajectory
+
+    roadmap = plan_roadmap(window, obstacles, start_xy, roadmap_params)
+    traj = plan_trajectory(roadmap, window, obstacles, params, start_heading,
+                           start_speed=start_speed, end_speed=end_speed)
+    return [roadmap], traj
+
+
+def _jsonable(value: Any) -> Any:
+    """Plain JSON values: non-finite floats become ``None``, numpy scalars Python ones."""
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def _safe_speed(gap: float, v_leader: float, b: float, tau: float) -> float:
+    """Krauss's safe speed [m/s]: stop behind a leader braking at ``b`` after a gap [m]."""
+    disc = (b * tau) ** 2 + v_leader**2 + 2.0 * b * gap
+    if disc <= 0.0:
+        return 0.0
+    return max(-b * tau + math.sqrt(disc), 0.0)
+
+
+def _lane_index(lane_id: str) -> int:
+    try:
+        return int(lane_id.rsplit("_", 1)[1])
+    except (IndexError, ValueError):
+        return 0
+
+
+def _check_xml(path: Path) -> None:
+    try:
+        ET.parse(path)
+    except ET.ParseError as err:
+        raise SimulationError(f"SUMO input file {path} is not well-formed XML: {err}") from err
+
+
+def _sumo_message(err: BaseException) -> str:
+    msg = getattr(err, "message", None)
+    if isinstance(msg, str) and msg:
+        return msg
+    text = str(err)
+    if text.startswith("<libsumo"):
+        return type(err).__name__
+    return text
+
+
+def _safe_close(sumo_mod: Any) -> None:
+    with contextlib.suppress(Exception):
+        sumo_mod.close()
+
+
+def _safe_remove(sumo_mod: Any, vid: str) -> None:
+    with contextlib.suppress(Exception):
+        sumo_mod.vehicle.remove(vid)
+
+
+def _tail(path: Path, n: int = 3) -> str:
+    try:
+        lines = [ln.strip() for ln in path.read_text().splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return " | ".join(lines[-n:])
+
+
+def _want_progress(progress: bool | None) -> bool:
+    if progress is not None:
+        return progress
+    return bool(getattr(sys.stderr, "isatty", lambda: False)())
+
+
+def _progress_bar(total: float, name: str) -> Any:
+    from tqdm import tqdm
+
+    return tqdm(total=total, unit="s", desc=name, file=sys.stderr, leave=False,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.0f}/{total:.0f} s sim "
+                           "[{elapsed}<{remaining}]")
+
+
+def _write_csv(path: Path, cols: dict[str, np.ndarray]) -> None:
+    names = list(cols)
+    n = len(cols[names[0]]) if names else 0
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(names)
+        for i in range(n):
+            row = []
+            for name in names:
+                v = cols[name][i]
+                row.append(v if isinstance(v, str) else f"{float(v):.10g}")
+            w.writerow(row)
+
+
+#: At most this many plans are drawn with ``plot=True``.
+MAX_PLAN_PICTURES = 40
+
+
+def _plot(run: _Run, result: SimResult) -> None:
+    from splineplan import plot as splot
+
+    splot.plot_run_folder(run.out)
+    folder = run.out / "plans"
+    folder.mkdir(exist_ok=True)
+    ego = run.sc.ego
+    for i, (t, roadmaps, traj, window, obstacles) in enumerate(
+            result.plans[:MAX_PLAN_PICTURES]):
+        splot.plot_trajectory(traj, window, obstacles, roadmaps,
+                              path=folder / f"plan_{i:03d}_t{t:07.1f}.png",
+                              footprint_every=10.0, vehicle_size=(ego.length, ego.width),
+                              title=f"{run.sc.name}: plan {i} at t = {t:.1f} s")

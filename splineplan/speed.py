@@ -1,0 +1,98 @@
+"""Speed profile along a curve: cornering, speed-limit, acceleration and braking limits.
+
+Beyond the paper (which only states the cornering speed, equation 1): a forward pass bounds
+the speed by the acceleration limit, ``v_j^2 <= v_{j-1}^2 + 2 a_max ds``, and a backward pass
+by the braking limit, ``v_j^2 <= v_{j+1}^2 + 2 b_max ds``. Time follows from the speeds.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from splineplan.errors import ParameterError
+from splineplan.geometry import FloatArray
+
+log = logging.getLogger(__name__)
+
+
+def allowed_speed(kappa: ArrayLike, *, mu: float, g: float, s_max: float) -> FloatArray:
+    """Equation (1): ``min(sqrt(mu g / |kappa|), s_max)`` [m/s] at curvatures ``kappa`` [1/m]."""
+    k = np.abs(np.asarray(kappa, dtype=float))
+    with np.errstate(divide="ignore"):
+        v = np.sqrt(mu * g / k)
+    return np.asarray(np.minimum(v, s_max))
+
+
+def speed_profile(
+    s: ArrayLike,
+    limit: ArrayLike,
+    *,
+    a_max: float,
+    b_max: float,
+    start_speed: float = 0.0,
+    end_speed: float | None = None,
+) -> FloatArray:
+    """Fastest speeds ``(n,)`` [m/s] at stations ``s`` ``(n,)`` [m] within the limits.
+
+    Parameters
+    ----------
+    s
+        Increasing stations [m].
+    limit
+        Speed limit ``(n,)`` [m/s] at each station (cornering and ``s_max``).
+    a_max, b_max
+        Acceleration and braking limits [m/s^2], positive.
+    start_speed
+        Speed [m/s] at the first station. If it exceeds the limit there, or the curve ahead
+        cannot be taken from it within ``b_max``, the profile starts lower and a warning is
+        logged.
+    end_speed
+        Speed [m/s] at the last station (0 stops there); ``None`` keeps going as fast as
+        the limits allow.
+    """
+    st = np.asarray(s, dtype=float)
+    lim = np.asarray(limit, dtype=float)
+    if st.shape != lim.shape or st.ndim != 1 or len(st) == 0:
+        raise ParameterError("stations and limits must be 1-d arrays of the same length")
+    if a_max <= 0 or b_max <= 0:
+        raise ParameterError("a_max and b_max must be positive")
+    if start_speed < 0 or (end_speed is not None and end_speed < 0):
+        raise ParameterError("start and end speeds must be >= 0")
+    ds = np.diff(st)
+    v2 = np.square(lim)
+    v2[0] = min(v2[0], start_speed**2)
+    if end_speed is not None:
+        v2[-1] = min(v2[-1], end_speed**2)
+    # The passes are a recurrence; a Python loop over a few thousand floats is fast enough.
+    out = v2.tolist()
+    acc = (2.0 * a_max * ds).tolist()
+    brk = (2.0 * b_max * ds).tolist()
+    for j in range(1, len(out)):
+        out[j] = min(out[j], out[j - 1] + acc[j - 1])
+    for j in range(len(out) - 2, -1, -1):
+        out[j] = min(out[j], out[j + 1] + brk[j])
+    v = np.sqrt(np.asarray(out))
+    if v[0] < start_speed - 1e-9:
+        log.warning("start speed %.2f m/s exceeds what the curve allows (%.2f m/s)",
+                    start_speed, v[0])
+    return v
+
+
+def times_from_profile(s: ArrayLike, v: ArrayLike) -> FloatArray:
+    """Time ``(n,)`` [s] at each station, from 0, for speeds ``v`` [m/s].
+
+    Each step takes ``2 ds / (v_{j-1} + v_j)``, exact under constant acceleration; a step
+    between two zero speeds cannot be driven and raises :class:`ParameterError`.
+    """
+    st = np.asarray(s, dtype=float)
+    vel = np.asarray(v, dtype=float)
+    ds = np.diff(st)
+    vsum = vel[:-1] + vel[1:]
+    if np.any((vsum <= 0) & (ds > 0)):
+        j = int(np.argmax((vsum <= 0) & (ds > 0)))
+        raise ParameterError(f"speed is zero on both ends of the step at station {st[j]:.1f} m")
+    dt = np.where(ds > 0, 2.0 * ds / np.where(vsum > 0, vsum, 1.0), 0.0)
+    return np.concatenate(([0.0], np.cumsum(dt)))

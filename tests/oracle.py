@@ -1,0 +1,82 @@
+"""Independent raster oracle for level 2: passability and best clearance of a road.
+
+Written without the planner's code: the road is a shapely polygon, obstacles are plain
+polygons; both are rasterised (cell centres tested with shapely), the clearance of each
+free cell is a Euclidean distance transform, and the best bottleneck clearance from the
+start to the goal region is a widest path on the raster (thresholding plus connected
+components, bisecting over the distinct clearance values).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import shapely
+from scipy import ndimage
+from shapely.geometry import Polygon
+
+
+@dataclass(frozen=True)
+class OracleResult:
+    """Best clearance [m] over raster paths from start to goal (0 when the start cell is
+    blocked), the clearance field ``(ny, nx)`` [m] and the raster's origin and step."""
+
+    best_clearance: float
+    clearance: np.ndarray
+    origin: tuple[float, float]
+    step: float
+
+    def clearance_at(self, xy: np.ndarray) -> np.ndarray:
+        """Clearance [m] of the cells holding points ``(n, 2)``."""
+        ij = np.floor((np.asarray(xy) - self.origin) / self.step).astype(int)
+        return self.clearance[ij[:, 1], ij[:, 0]]
+
+
+def best_clearance(
+    road: Polygon,
+    obstacles: list[np.ndarray],
+    start: np.ndarray,
+    goal: Polygon,
+    *,
+    step: float = 0.1,
+) -> OracleResult:
+    """Widest passage on a raster of ``road`` among ``obstacles`` (polygons ``(k, 2)``).
+
+    The clearance of a cell is the distance [m] from its centre to the nearest centre of
+    a blocked cell (outside the road or inside an obstacle); this is within one cell
+    diagonal of the exact distance to the blocked set. The result is the largest ``c``
+    such that the cells of clearance ``>= c`` connect the start's cell (8-neighbours) to a
+    cell whose centre lies in ``goal``.
+    """
+    x0, y0, x1, y1 = road.bounds
+    x0, y0 = x0 - 2 * step, y0 - 2 * step
+    nx = int(np.ceil((x1 - x0) / step)) + 3
+    ny = int(np.ceil((y1 - y0) / step)) + 3
+    cx = x0 + (np.arange(nx) + 0.5) * step
+    cy = y0 + (np.arange(ny) + 0.5) * step
+    gx, gy = np.meshgrid(cx, cy)
+    free = shapely.contains_xy(road, gx, gy)
+    for poly in obstacles:
+        free &= ~shapely.contains_xy(Polygon(poly), gx, gy)
+    clearance = ndimage.distance_transform_edt(free) * step
+    in_goal = shapely.contains_xy(goal, gx, gy)
+    i, j = int((start[1] - y0) // step), int((start[0] - x0) // step)
+    levels = np.unique(clearance[clearance > 0])
+    struct = np.ones((3, 3), dtype=bool)
+
+    def passable(c: float) -> bool:
+        labels, _ = ndimage.label(clearance >= c, structure=struct)
+        k = labels[i, j]
+        return bool(k and np.any(labels[in_goal] == k))
+
+    if not len(levels) or not passable(levels[0]):
+        return OracleResult(0.0, clearance, (x0, y0), step)
+    lo, hi = 0, len(levels) - 1  # passable(levels[lo]) holds; bisect for the largest
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if passable(levels[mid]):
+            lo = mid
+        else:
+            hi = mid - 1
+    return OracleResult(float(levels[lo]), clearance, (x0, y0), step)

@@ -1,0 +1,62 @@
+"""Tests of ``splineplan route``: output, picture, and one-line errors."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from conftest import NETS
+
+from splineplan.cli import main
+
+CITY = str(NETS / "city.net.xml")
+
+
+def test_route_prints_edges_and_length(capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["route", CITY, "SWA0", "G1G2"]) == 0
+    out = capsys.readouterr().out
+    assert "bridge_east" in out and "length:" in out and " m" in out
+
+
+def test_route_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    png = tmp_path / "route.png"
+    assert main(["route", CITY, "A1B1", "C2C3", "--vclass", "bus", "--weight", "time",
+                 "--json", "--plot", str(png), "--start-pos", "5"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["edges"][0] == "A1B1" and data["edges"][-1] == "C2C3"
+    assert data["vclass"] == "bus" and data["weight"] == "time" and data["length"] > 0
+    assert png.stat().st_size > 10_000
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (["route", "missing.net.xml", "a", "b"], "missing.net.xml"),
+    (["route", str(NETS / "city.edg.xml"), "a", "b"], "city.edg.xml"),
+    (["route", CITY, "nowhere", "G1G2"], "'nowhere'"),
+    (["route", CITY, "SWA0", "G1G2", "--vclass", "car"], "'car'"),
+    (["route", CITY, "SWA0", "G1G2", "--avoid", "bridge_east"], "bridge_east"),
+    (["route", CITY, "SWA0", "G1G2", "--start-pos", "-3"], "start_pos"),
+    (["route", CITY, "SWA0", "bus_B1C2"], "bus_B1C2"),
+])
+def test_route_errors_are_one_line(args: list[str], needle: str,
+                                   capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(args) != 0
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and needle in lines[0] and "error" in lines[0]
+    assert captured.out == ""
+
+
+@pytest.mark.parametrize("args", [
+    ["route", CITY, "SWA0", "G1G2", "--weight", "fuel"],
+    ["route", CITY, "SWA0"],
+    ["route", CITY, "SWA0", "G1G2", "--start-pos", "x"],
+])
+def test_argument_errors_are_one_line(args: list[str],
+                                      capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as info:
+        main(args)
+    assert info.value.code != 0
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "error" in lines[0]

@@ -1,0 +1,151 @@
+"""Tests of splineplan.network: loading, the per-class edge graph, lane geometry, corridors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sumolib
+from conftest import NETS
+from shapely.geometry import Point, Polygon
+
+from splineplan.errors import NetworkError, UnknownEdgeError, VehicleClassError
+from splineplan.network import load_network, route_corridor
+from splineplan.route import shortest_route
+
+BUNDLED = sorted(NETS.glob("*.net.xml"))
+
+
+def test_bundled_networks_exist() -> None:
+    names = {p.name for p in BUNDLED}
+    assert {"straight.net.xml", "grid.net.xml", "city.net.xml"} <= names
+    for p in BUNDLED:
+        assert p.stat().st_size < 1_000_000
+
+
+def _check_against_sumolib(path: Path, vclasses: tuple[str, ...]) -> None:
+    net = load_network(path)
+    sn = sumolib.net.readNet(str(path), withInternal=True)
+    normal = [e for e in sn.getEdges() if e.getFunction() == ""]
+    assert set(net.edge_ids) == {e.getID() for e in normal}
+    assert not any(e.startswith(":") for e in net.edge_ids)
+    for e in normal:
+        i = net.edge_index(e.getID())
+        assert net.lengths[i] == pytest.approx(e.getLength())
+        assert net.speeds[i] == pytest.approx(e.getSpeed())
+        lanes = net.lanes_of(e.getID())
+        assert [ln.id for ln in lanes] == [ln.getID() for ln in e.getLanes()]
+        for ln, sl in zip(lanes, e.getLanes(), strict=True):
+            assert ln.width == pytest.approx(sl.getWidth())
+            assert np.allclose(ln.shape, np.asarray(sl.getShape())[:, :2])
+    for vc in vclasses:
+        g = net.graph(vc)
+        for e in normal:
+            i = net.edge_index(e.getID())
+            mine = {net.edge_ids[j] for j in g.indices[g.indptr[i]:g.indptr[i + 1]]}
+            theirs = {f.getID() for f in e.getAllowedOutgoing(vc) if f.getFunction() == ""}
+            assert mine == theirs, e.getID()
+            assert bool(g.usable[i]) == e.allows(vc)
+
+
+@pytest.mark.parametrize("path", BUNDLED, ids=lambda p: p.name)
+def test_graph_matches_sumolib(path: Path) -> None:
+    _check_against_sumolib(path, ("passenger", "bus", "bicycle"))
+
+
+def test_graph_matches_sumolib_monaco(monaco_net: Path) -> None:
+    _check_against_sumolib(monaco_net, ("passenger",))
+
+
+def test_city_has_the_promised_features() -> None:
+    net = load_network(NETS / "city.net.xml")
+    assert net.n_edges >= 60
+    assert not net.allows("bus_B1C2", "passenger") and net.allows("bus_B1C2", "bus")
+    assert net.allows("bike_A2B3", "bicycle") and not net.allows("bike_A2B3", "passenger")
+    assert not net.connections_between("B1C1", "C1C2")  # a forbidden turn
+    assert net.connections_between("B1C1", "C1D1", vclass="passenger")
+    # one-way street: no edge back
+    assert "C1B1" not in net
+    conns = net.connections_between("C1C2", "C2C3", vclass="passenger")
+    assert conns and all(c.via for c in conns)
+    via = net.internal_lane(conns[0].via[0])
+    assert via.shape.shape[1] == 2 and via.length > 0
+
+
+def test_missing_file() -> None:
+    with pytest.raises(NetworkError, match=r"nope\.net\.xml"):
+        load_network("nope.net.xml")
+
+
+def test_not_a_network(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text("this is not xml")
+    with pytest.raises(NetworkError, match=r"bad\.net\.xml"):
+        load_network(bad)
+    routes = tmp_path / "routes.xml"
+    routes.write_text('<routes><vType id="a"/></routes>')
+    with pytest.raises(NetworkError, match=r"routes\.xml"):
+        load_network(routes)
+
+
+def test_unknown_vclass_and_edge() -> None:
+    net = load_network(NETS / "grid.net.xml")
+    with pytest.raises(VehicleClassError, match="car"):
+        net.graph("car")
+    with pytest.raises(UnknownEdgeError, match="nowhere"):
+        net.lanes_of("nowhere")
+
+
+# ---- corridor adapter -------------------------------------------------------------------
+
+def _lane_points(lane_shape: np.ndarray, trim: float = 0.1) -> np.ndarray:
+    """Points along a lane centre line, without its ends."""
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(lane_shape, axis=0).T))))
+    t = np.linspace(trim * s[-1], (1 - trim) * s[-1], 15)
+    return np.column_stack((np.interp(t, s, lane_shape[:, 0]), np.interp(t, s, lane_shape[:, 1])))
+
+
+def _check_corridor(net_path: Path, frm: str, to: str, vclass: str) -> None:
+    net = load_network(net_path)
+    route = shortest_route(net, frm, to, vclass=vclass)
+    cor = route_corridor(net, route)
+    poly = Polygon(cor.polygon()).buffer(1e-6)
+    assert poly.is_valid
+    assert cor.edges == route.edges
+    for eid in route.edges:
+        allowed = [ln for ln in net.lanes_of(eid) if ln.allows(vclass)]
+        for ln in allowed:
+            for p in _lane_points(ln.shape):
+                assert poly.contains(Point(p)), (eid, ln.id, p)
+        # edge_at of the middle of the edge's lanes is that edge
+        mid = _lane_points(allowed[0].shape, 0.5)[0]
+        s = cor.to_sl(mid[None])[0, 0]
+        assert cor.edge_at(float(s)) == eid
+        # width in the middle of the edge: the allowed lanes side by side
+        right, left = cor.bounds_at(s)
+        expect = sum(ln.width for ln in net.lanes_of(eid)[allowed[0].index:allowed[-1].index + 1])
+        assert float(left - right) == pytest.approx(expect, abs=0.05)
+
+
+def test_corridor_straight() -> None:
+    _check_corridor(NETS / "straight.net.xml", "e0", "e2", "passenger")
+    net = load_network(NETS / "straight.net.xml")
+    cor = route_corridor(net, shortest_route(net, "e0", "e2"))
+    right, left = cor.bounds_at(np.array([100.0, 300.0, 500.0]))
+    assert np.allclose(left - right, 9.6, atol=1e-6)
+    assert cor.length == pytest.approx(600.0, abs=1.0)
+
+
+def test_corridor_city() -> None:
+    _check_corridor(NETS / "city.net.xml", "SWA0", "G1G2", "passenger")
+    _check_corridor(NETS / "city.net.xml", "C0C1", "C2C3", "passenger")  # bus lane excluded
+    _check_corridor(NETS / "city.net.xml", "C0C1", "C2C3", "bus")
+    net = load_network(NETS / "city.net.xml")
+    cor_p = route_corridor(net, shortest_route(net, "C0C1", "C2C3"))
+    cor_b = route_corridor(net, shortest_route(net, "C0C1", "C2C3", vclass="bus"))
+    s_p = cor_p.edge_starts[0] + 30.0
+    s_b = cor_b.edge_starts[0] + 30.0
+    wp = np.subtract(*cor_p.bounds_at(s_p)[::-1])
+    wb = np.subtract(*cor_b.bounds_at(s_b)[::-1])
+    assert wp == pytest.approx(3.2, abs=1e-6) and wb == pytest.approx(6.4, abs=1e-6)

@@ -1,0 +1,63 @@
+"""Levels 2 and 3 along a long curved corridor: joins, timings, feasibility (shapely)."""
+
+from __future__ import annotations
+
+import numpy as np
+from shapely import affinity
+from shapely.geometry import Polygon, box
+
+from splineplan.corridor import Corridor
+from splineplan.obstacles import Obstacles
+from splineplan.planner import CorridorPlan, plan_corridor
+from splineplan.roadmap import RoadmapParams
+
+
+def curved_corridor() -> tuple[Corridor, Obstacles]:
+    """A 700 m arc of radius 300 m, 9.6 m wide, with cars parked in the outer lanes."""
+    th = np.linspace(0.0, 700.0 / 300.0, 400)
+    ref = np.column_stack((300.0 * np.sin(th), 300.0 * (1.0 - np.cos(th))))
+    cor = Corridor.from_reference(ref, np.full(400, 4.8), np.full(400, -4.8))
+    st = np.array([100.0, 180.0, 300.0, 380.0, 560.0, 640.0])
+    lat = np.array([3.2, -3.2, 3.2, -3.2, 3.2, -3.2])
+    obs = Obstacles.from_boxes(cor.to_xy(st, lat), cor.heading_at(st), 4.5, 1.8)
+    return cor, obs
+
+
+def test_elongated_obstacles_cover_the_original_and_reach_further() -> None:
+    obs = Obstacles.from_boxes(np.array([[10.0, 2.0]]), 0.3, 4.0, 2.0)
+    out = obs.elongated(np.array([0.3]), 1.35)
+    a, b = Polygon(obs.polygon(0)), Polygon(out.polygon(0))
+    assert b.contains(a.buffer(-1e-9))
+    assert abs(b.area - (a.area + 2 * 1.35 * 2.0)) < 1e-6
+    assert out.ids == obs.ids
+
+
+def test_long_curved_corridor_is_continuous_and_feasible() -> None:
+    cor, obs = curved_corridor()
+    rp = RoadmapParams()
+    start = cor.to_xy(np.array([2.0]), np.array([-3.2]))[0]
+    plan = plan_corridor(cor, obs, start, float(cor.heading_at(2.0)), roadmap_params=rp)
+    assert isinstance(plan, CorridorPlan)
+    roadmaps, tr = plan  # unpacks as before
+    assert len(roadmaps) == 3
+    assert plan.roadmap_seconds > 0 and plan.trajectory_seconds > 0
+    # continuity: positions 0.5 m apart, heading and speed without jumps
+    step = np.hypot(np.diff(tr.x), np.diff(tr.y))
+    assert step.max() < 0.6
+    assert np.abs(np.diff(np.unwrap(tr.heading))).max() < 0.05
+    dv2 = np.diff(tr.speed**2) / (2 * np.maximum(np.diff(tr.s), 1e-9))
+    assert dv2.max() <= 2.0 + 1e-6 and dv2.min() >= -4.0 - 1e-6
+    assert tr.speed[-1] == 0.0 and tr.s[-1] > 680.0
+    assert tr.feasible
+    # shapely oracle: footprints vs obstacles grown by the margin and the road shrunk by it
+    base = box(-rp.vehicle_length / 2, -rp.vehicle_width / 2,
+               rp.vehicle_length / 2, rp.vehicle_width / 2)
+    grown = [Polygon(p).buffer(rp.safety_margin - 1e-6) for p in obs.polygons()]
+    road = Polygon(cor.polygon()).buffer(-(rp.safety_margin - 1e-6), join_style=2)
+    st = cor.to_sl(tr.xy)[:, 0]
+    inner = (st > 4.0) & (st < cor.length - 4.0)  # the footprint overhangs the road's ends
+    for x, y, h, ok in zip(tr.x, tr.y, tr.heading, inner, strict=True):
+        fp = affinity.translate(affinity.rotate(base, h, origin=(0, 0), use_radians=True), x, y)
+        assert not any(fp.intersects(g) for g in grown)
+        if ok:
+            assert road.contains(fp)

@@ -1,0 +1,429 @@
+"""Level 2: sweep-line roadmap, widest-then-shortest search.
+
+Checked against the paper's cases (Fig. 4), an exact geometric check of the free
+intervals with shapely, and a raster oracle (tests/oracle.py) on random obstacle fields.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+import shapely
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from oracle import best_clearance
+from shapely.geometry import LineString, Polygon
+
+from splineplan.corridor import Corridor
+from splineplan.errors import GeometryError, ParameterError, RoadBlockedError
+from splineplan.obstacles import Obstacles
+from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
+
+R_DEFAULT = RoadmapParams().inflation  # 1.2 m
+
+
+# -- scenarios ---------------------------------------------------------------------------
+def straight(length: float = 100.0, left: float = 4.8, right: float = -4.8, **kw) -> Corridor:
+    ref = np.array([[0.0, 0.0], [length, 0.0]])
+    return Corridor.from_reference(ref, [left] * 2, [right] * 2, **kw)
+
+
+def open_road(corridor: Corridor) -> Polygon:
+    """The road of a straight corridor along +x, extended 3 m beyond both ends (the ends
+    are no walls)."""
+    right, left = corridor.bounds_at([0.0, corridor.length])
+    x0, x1 = -3.0, corridor.length + 3.0
+    return Polygon([(x0, right[0]), (x1, right[1]), (x1, left[1]), (x0, left[0])])
+
+
+def frenet_map(kind: str, length: float, radius: float):
+    """Analytic (s, l) -> (x, y) of a straight or circular road (extended straight beyond
+    both ends), written independently of Corridor."""
+    if kind == "straight":
+        def f(s, l):  # noqa: E741
+            s, l = np.broadcast_arrays(np.asarray(s, float), np.asarray(l, float))  # noqa: E741
+            return np.stack((s, l), -1)
+        return f, lambda s: np.zeros_like(np.asarray(s, float))
+    sg = 1.0 if kind == "left" else -1.0
+    end = length / radius
+
+    def f(s, l):  # noqa: E741
+        s, l = np.broadcast_arrays(np.asarray(s, float), np.asarray(l, float))  # noqa: E741
+        th = np.clip(s, 0.0, length) / radius
+        rad = radius - sg * l
+        x = rad * np.sin(th) + np.where(s < 0, s, 0) + np.where(s > length,
+                                                                (s - length) * np.cos(end), 0)
+        y = sg * (radius - rad * np.cos(th)) + np.where(s > length,
+                                                        sg * (s - length) * np.sin(end), 0)
+        return np.stack((x, y), -1)
+    return f, lambda s: sg * np.clip(np.asarray(s, float), 0.0, length) / radius
+
+
+def field(seed: int, kind: str, count: int, *, length: float = 60.0, width: float = 9.6,
+          radius: float = 40.0):
+    """A road with random boxes (random size and heading); the first 8 m stay clear.
+
+    Returns the corridor, the obstacles, the start, and for the oracle the road polygon
+    (extended 3 m beyond both ends) and the goal region beyond the end."""
+    rng = np.random.default_rng(seed)
+    f, head = frenet_map(kind, length, radius)
+    s = np.linspace(0.0, length, int(length / 0.25) + 1)
+    corridor = Corridor.from_reference(f(s, 0.0), np.full(len(s), width / 2),
+                                       np.full(len(s), -width / 2))
+    se = np.linspace(-3.0, length + 3.0, int((length + 6.0) / 0.1) + 1)
+    road = Polygon(np.concatenate((f(se, -width / 2), f(se[::-1], width / 2))))
+    gs = np.linspace(length + 0.5, length + 3.0, 6)
+    goal = Polygon(np.concatenate((f(gs, -width / 2), f(gs[::-1], width / 2))))
+    os_ = rng.uniform(8.0, length - 5.0, count)
+    ol = rng.uniform(-width / 2, width / 2, count)
+    oh = head(os_) + rng.uniform(-np.pi / 2, np.pi / 2, count)
+    obs = Obstacles.from_boxes(f(os_, ol), oh, rng.uniform(1.0, 4.5, count),
+                               rng.uniform(0.5, 1.8, count))
+    return corridor, obs, f(0.0, 0.0), road, goal
+
+
+def assert_consistent(rm: Roadmap) -> None:
+    """Invariants of a result, re-derived from its own arrays."""
+    m = len(rm.path)
+    assert m == len(rm.xy) == len(rm.s) == len(rm.l) == len(rm.width)
+    np.testing.assert_allclose(rm.xy, rm.graph_xy[rm.path])
+    np.testing.assert_allclose(rm.l, (rm.graph_lo + rm.graph_hi)[rm.path] / 2)
+    np.testing.assert_allclose(rm.width, (rm.graph_hi - rm.graph_lo)[rm.path])
+    assert np.all(np.diff(rm.graph_line[rm.path]) == 1)
+    assert rm.graph_line[rm.path[-1]] == rm.graph_line.max()
+    arcs = {tuple(a) for a in rm.arcs.tolist()}
+    assert all((a, b) in arcs for a, b in itertools.pairwise(rm.path.tolist()))
+    assert np.all(np.diff(rm.graph_line[rm.arcs], axis=1) == 1)
+    assert rm.length == pytest.approx(np.hypot(*np.diff(rm.xy, axis=0).T).sum())
+    assert rm.bottleneck_width == pytest.approx(rm.width.min())
+    assert rm.width[rm.bottleneck_index] == rm.bottleneck_width
+    assert np.all(rm.graph_hi >= rm.graph_lo)
+    assert len(rm.links) == m - 1 and len(rm.arc_direct) == len(rm.arcs)
+
+
+def assert_free(rm: Roadmap, obs: Obstacles, road: Polygon, r: float) -> None:
+    """The passage polyline keeps r from every obstacle and the road edge (shapely)."""
+    line = LineString(rm.passage_xy) if len(rm.passage_xy) > 1 else shapely.Point(rm.xy[0])
+    for poly in obs.polygons():
+        assert line.distance(Polygon(poly)) >= r - 1e-6
+    # 1 cm for the corridor's polyline approximation of curved boundaries
+    assert road.buffer(-(r - 0.01)).contains(line)
+
+
+# -- the paper's cases (Fig. 4) ----------------------------------------------------------
+@pytest.mark.parametrize(("left", "right"), [(4.8, -4.8), (6.0, -2.0), (3.0, -5.5)])
+def test_empty_road_runs_along_the_middle(left: float, right: float) -> None:
+    corridor = straight(80.0, left, right)
+    rm = plan_roadmap(corridor, Obstacles.empty(), (0.0, 0.0))
+    assert_consistent(rm)
+    np.testing.assert_allclose(rm.l, (left + right) / 2, atol=1e-9)
+    np.testing.assert_allclose(rm.width, left - right - 2 * R_DEFAULT, atol=1e-9)
+    np.testing.assert_allclose(rm.s, np.arange(81.0))
+    assert rm.length == pytest.approx(80.0)
+
+
+def test_empty_curved_road_runs_along_the_middle() -> None:
+    corridor, obs, start, road, _ = field(0, "left", 0)
+    rm = plan_roadmap(corridor, obs, start)
+    assert np.max(np.abs(rm.l)) < 1e-6
+    # the vertices lie on the analytic centre circle (radius 40 about (0, 40))
+    np.testing.assert_allclose(np.hypot(rm.xy[:, 0], rm.xy[:, 1] - 40.0), 40.0, atol=2e-3)
+    assert_free(rm, obs, road, R_DEFAULT)
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_one_obstacle_is_passed_on_the_wider_side_in_the_middle_of_the_gap(side: float) -> None:
+    corridor = straight(100.0)
+    # a car at l = +-1 covers |l| in [0.1, 1.9]; grown by 1.2 it covers [-1.1, 3.1]
+    obs = Obstacles.from_boxes([[40.0, side]], [0.0], [4.5], [1.8])
+    rm = plan_roadmap(corridor, obs, (0.0, 0.0))
+    assert_consistent(rm)
+    beside = np.abs(rm.s - 40.0) <= 2.25 + R_DEFAULT - 0.01
+    wide_gap = (-3.6, -1.1) if side > 0 else (1.1, 3.6)
+    np.testing.assert_allclose(rm.l[rm.s == 40.0], np.mean(wide_gap), atol=1e-9)
+    assert np.all(np.sign(rm.l[beside]) == -side)
+    assert rm.bottleneck_width == pytest.approx(2.5)
+    assert abs(rm.bottleneck_s - 40.0) <= 2.25 + R_DEFAULT
+    # far from the obstacle the path is back in the middle of the road
+    np.testing.assert_allclose(rm.l[(rm.s < 30) | (rm.s > 50)], 0.0, atol=1e-9)
+    assert_free(rm, obs, open_road(corridor), R_DEFAULT)
+
+
+def _gate_field() -> tuple[Corridor, Obstacles]:
+    """A 14 m road closed by a row of obstacles at s = 40..44 but for two gaps: a narrow
+    one straight ahead (free width 3.0 - 2.4 = 0.6 m) and a wide one off to the left
+    (4.5 - 2.4 = 2.1 m); behind, a second row with both gaps likewise."""
+    corridor = straight(100.0, 7.0, -7.0)
+    rows = []
+    for s0 in (40.0, 60.0):
+        rows += [[[s0, -7.5], [s0 + 4, -7.5], [s0 + 4, -1.5], [s0, -1.5]],
+                 [[s0, 1.5], [s0 + 4, 1.5], [s0 + 4, 2.5], [s0, 2.5]]]
+    return corridor, Obstacles.from_polygons([np.array(p, float) for p in rows])
+
+
+def test_field_is_crossed_by_the_widest_passage_not_the_shortest() -> None:
+    corridor, obs = _gate_field()
+    rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5))
+    assert_consistent(rm)
+    at_rows = (np.abs(rm.s - 42.0) <= 2.0) | (np.abs(rm.s - 62.0) <= 2.0)
+    np.testing.assert_allclose(rm.l[at_rows], (2.5 + 1.2 + 7.0 - 1.2) / 2, atol=1e-9)
+    assert rm.bottleneck_width == pytest.approx(2.1)
+    assert_free(rm, obs, open_road(corridor), R_DEFAULT)
+
+
+def test_with_small_wmax_the_field_is_crossed_by_the_shortest_passage() -> None:
+    corridor, obs = _gate_field()
+    rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=0.5))
+    assert_consistent(rm)
+    at_rows = (np.abs(rm.s - 42.0) <= 2.0) | (np.abs(rm.s - 62.0) <= 2.0)
+    np.testing.assert_allclose(rm.l[at_rows], 0.0, atol=1e-9)
+    assert rm.bottleneck_width == pytest.approx(0.6)
+    wide = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5))
+    assert rm.length < wide.length
+
+
+def test_start_picks_the_interval_the_vehicle_is_in() -> None:
+    corridor, obs = _gate_field()
+    rm = plan_roadmap(corridor, obs, (43.0, 5.0), RoadmapParams(wmax=0.5))
+    assert rm.s[0] == 43.0 and rm.l[0] == pytest.approx(4.75)
+    # off the line: the first line at or ahead of the vehicle
+    rm = plan_roadmap(corridor, obs, (42.3, 0.2))
+    assert rm.s[0] == 43.0 and rm.l[0] == pytest.approx(0.0)
+
+
+def test_links_make_a_free_passage_where_the_midpoint_segment_is_not() -> None:
+    # an obstacle whose grown front lies just ahead of a sweep line: the segment from the
+    # road's middle to the gap beside it cuts the grown corner, yet the road is open
+    corridor = straight(100.0)
+    for front in np.arange(30.0, 31.0, 0.05):
+        obs = Obstacles.from_boxes([[front + 2.25, 0.5]], [0.0], [4.5], [1.8])
+        rm = plan_roadmap(corridor, obs, (0.0, 0.0))
+        assert_consistent(rm)
+        assert rm.bottleneck_width == pytest.approx(2.0)
+        assert_free(rm, obs, open_road(corridor), R_DEFAULT)
+
+
+# -- free intervals against shapely ------------------------------------------------------
+def _shapely_intervals(corridor: Corridor, obs: Obstacles, s: float, r: float):
+    lo, hi = (float(v) for v in corridor.bounds_at(s))
+    h = float(corridor.heading_at(s))
+    c = corridor.to_xy(s, 0.0)
+    n = np.array([-np.sin(h), np.cos(h)])
+    seg = LineString([c + (lo + r) * n, c + (hi - r) * n])
+    grown = shapely.union_all([Polygon(p).buffer(r, quad_segs=256) for p in obs.polygons()])
+    free = seg.difference(grown)
+    parts = getattr(free, "geoms", [free])
+    out = []
+    for g in parts:
+        if g.is_empty:
+            continue
+        a, b = np.asarray(g.coords)[[0, -1]]
+        la, lb = sorted(((a - c) @ n, (b - c) @ n))
+        out.append((la, lb))
+    return sorted(out)
+
+
+def test_free_intervals_match_shapely_with_nonconvex_and_large_polygons() -> None:
+    corridor = straight(40.0, 8.0, -8.0)
+    u_shape = np.array([[10, -4], [16, -4], [16, 2], [14, 2], [14, -2], [12, -2], [12, 2],
+                        [10, 2]], float)  # open towards +l: a slot 2 m wide
+    big = np.array([[22, -8.5], [30, -8.5], [30, 0.5], [22, 0.5]], float)  # wider than 2 r
+    tri = np.array([[33, 3], [37, 5], [33.5, 7.5]], float)
+    obs = Obstacles.from_polygons([u_shape, big, tri])
+    params = RoadmapParams(vehicle_width=1.0, safety_margin=0.2, d=0.5)  # r = 0.7
+    rm = plan_roadmap(corridor, obs, (0.0, 0.0), params)
+    for k, s in enumerate(np.arange(0.0, 40.01, 0.5)):
+        got = sorted(zip(rm.graph_lo[rm.graph_line == k], rm.graph_hi[rm.graph_line == k],
+                         strict=True))
+        want = _shapely_intervals(corridor, obs, s, 0.7)
+        assert len(got) == len(want), s
+        np.testing.assert_allclose(got, want, atol=1e-3)
+    # the sweep line at s = 13 runs up the U's slot (2 m wide, 1 m from each wall > r):
+    # free from the slot's grown floor at l = -2 + 0.7 to the grown road edge
+    line = rm.graph_line == 26
+    np.testing.assert_allclose(rm.graph_lo[line], [-8.0 + 0.7, -1.3])
+    np.testing.assert_allclose(rm.graph_hi[line], [-4.7, 7.3])
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10**6), kind=st.sampled_from(["straight", "left", "right"]),
+       count=st.integers(1, 12))
+def test_free_intervals_match_shapely_on_random_fields(seed: int, kind: str,
+                                                        count: int) -> None:
+    corridor, obs, start, _, _ = field(seed, kind, count, length=30.0, radius=25.0)
+    params = RoadmapParams(d=3.0)
+    try:
+        rm = plan_roadmap(corridor, obs, start, params)
+    except RoadBlockedError:
+        return
+    for k in range(int(rm.graph_line.max()) + 1):
+        s = float(rm.graph_s[rm.graph_line == k][0])
+        got = sorted(zip(rm.graph_lo[rm.graph_line == k], rm.graph_hi[rm.graph_line == k],
+                         strict=True))
+        want = [w for w in _shapely_intervals(corridor, obs, s, params.inflation)
+                if w[1] - w[0] > 2e-3]
+        got = [g for g in got if g[1] - g[0] > 2e-3]
+        assert len(got) == len(want)
+        np.testing.assert_allclose(got, want, atol=1e-3)
+
+
+# -- against the raster oracle -----------------------------------------------------------
+#: Raster step [m] of the oracle.
+H = 0.1
+#: How much the raster overstates the best clearance: a cell's clearance is the distance
+#: to the nearest *blocked cell centre*, at most one cell diagonal (H sqrt 2) beyond the
+#: blocked set, and a raster path runs between cell centres, up to half a diagonal
+#: closer to an obstacle than its cells' centres. So a raster clearance c means a real
+#: passage of clearance c - 1.5 H sqrt 2, and a real one of clearance c a raster one of
+#: at least c - H sqrt 2 / 2.
+RASTER_TOL = 1.5 * H * np.sqrt(2.0)
+
+
+def exist_tol(d: float) -> float:
+    """Margin [m] beyond the inflation above which the roadmap must find a passage.
+
+    The raster's error plus 0.05 d: links between sweep lines are straight and tried at
+    finitely many places (the midpoints, constant-offset links across the intervals'
+    common range, and links between the same fractions of both intervals), so a passage
+    whose lateral drift across a band exceeds its margin may be missed; such passages
+    have a margin of order d times their slope. On 1000s of random fields with d <= 2 m
+    no passage with a margin above the raster error was missed.
+    """
+    return RASTER_TOL + 0.05 * d
+
+
+def check_against_oracle(seed: int, kind: str, count: int, d: float, wmax: float) -> None:
+    corridor, obs, start, road, goal = field(seed, kind, count)
+    params = RoadmapParams(d=d, wmax=wmax)
+    r = params.inflation
+    margin = best_clearance(road, obs.polygons(), start, goal, step=H).best_clearance - r
+    try:
+        rm = plan_roadmap(corridor, obs, start, params)
+    except RoadBlockedError as err:
+        assert margin <= exist_tol(d), f"oracle margin {margin:.3f} m but {err}"
+        assert 0.0 <= err.station - float(corridor.offset) <= corridor.length
+        return
+    assert_consistent(rm)
+    assert_free(rm, obs, road, r)
+    # a free passage exists, so the raster finds one up to its error
+    assert margin >= -RASTER_TOL
+    # the widest passage of the raster crosses every sweep line in a free interval at
+    # least 2 (margin - RASTER_TOL) wide: the roadmap's (capped) bottleneck is no narrower
+    assert min(rm.bottleneck_width, wmax) >= min(2 * (margin - RASTER_TOL), wmax) - 1e-9
+    if np.all(rm.arc_direct[[np.flatnonzero((rm.arcs == (a, b)).all(axis=1))[0]
+                             for a, b in zip(rm.path[:-1], rm.path[1:], strict=True)]]):
+        np.testing.assert_allclose(rm.passage_xy, rm.xy)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10**6), kind=st.sampled_from(["straight", "left", "right"]),
+       count=st.integers(0, 16), d=st.sampled_from([0.5, 1.0, 2.0]),
+       wmax=st.sampled_from([1.0, 3.5, 100.0]))
+def test_roadmap_agrees_with_raster_oracle(seed: int, kind: str, count: int, d: float,
+                                           wmax: float) -> None:
+    check_against_oracle(seed, kind, count, d, wmax)
+
+
+@pytest.mark.slow
+@settings(max_examples=600, deadline=None)
+@given(seed=st.integers(0, 10**6), kind=st.sampled_from(["straight", "left", "right"]),
+       count=st.integers(0, 16), d=st.sampled_from([0.5, 1.0, 2.0]),
+       wmax=st.sampled_from([1.0, 3.5, 100.0]))
+def test_roadmap_agrees_with_raster_oracle_long(seed: int, kind: str, count: int, d: float,
+                                                wmax: float) -> None:
+    check_against_oracle(seed, kind, count, d, wmax)
+
+
+# -- blocked roads and bad input ---------------------------------------------------------
+def test_blocked_road_names_station_and_edge() -> None:
+    ref = np.array([[0.0, 0.0], [100.0, 0.0]])
+    corridor = Corridor.from_reference(ref, [4.8, 4.8], [-4.8, -4.8], edges=("a", "b"),
+                                       edge_starts=(0, 50), offset=200.0)
+    wall = Obstacles.from_boxes([[70.0, 0.0]], [0.0], [1.0], [12.0])
+    with pytest.raises(RoadBlockedError) as info:
+        plan_roadmap(corridor, wall, (200.0 * 0 + 0.0, 0.0))
+    err = info.value
+    # the wall spans s = 69.5..70.5; grown by 1.2 m it closes sweep lines 69 and 70
+    assert err.station == pytest.approx(200.0 + 69.0)
+    assert err.edge == "b"
+    assert "269.0 m" in str(err) and "'b'" in str(err)
+    early = Obstacles.from_boxes([[20.0, 0.0]], [0.0], [1.0], [12.0])
+    with pytest.raises(RoadBlockedError) as info:
+        plan_roadmap(corridor, early, (0.0, 0.0))
+    assert info.value.edge == "a" and info.value.station == pytest.approx(219.0)
+
+
+def test_blocked_by_two_staggered_rows_reports_the_dead_end() -> None:
+    # each row leaves a gap, but the second row's gap is on the other side and the
+    # rows are too close to get across: the dead end starts at the second row
+    corridor = straight(100.0, 4.8, -4.8)
+    obs = Obstacles.from_polygons([
+        np.array([[40, -5], [44, -5], [44, 1.5], [40, 1.5]], float),
+        np.array([[44.5, -1.5], [48, -1.5], [48, 5], [44.5, 5]], float)])
+    with pytest.raises(RoadBlockedError) as info:
+        plan_roadmap(corridor, obs, (0.0, 0.0))
+    assert 43.0 <= info.value.station <= 44.0
+    assert info.value.edge is None
+
+
+def test_narrow_road_without_room_for_the_vehicle_is_blocked() -> None:
+    corridor = straight(50.0, 1.0, -1.0)  # 2 m < 2.4 m grown vehicle
+    with pytest.raises(RoadBlockedError) as info:
+        plan_roadmap(corridor, Obstacles.empty(), (0.0, 0.0))
+    assert info.value.station == 0.0
+    # exactly as wide as the grown vehicle: one zero-width interval per line
+    rm = plan_roadmap(straight(50.0, 1.2, -1.2), Obstacles.empty(), (0.0, 0.0))
+    assert rm.bottleneck_width == 0.0
+
+
+@pytest.mark.parametrize("kwargs", [
+    {"d": 0.0}, {"d": -1.0}, {"wmax": 0.0}, {"safety_margin": -0.1},
+    {"vehicle_width": float("nan")}, {"vehicle_length": float("inf")},
+    {"segment_length": 1.0, "d": 1.0}, {"d": "1"}, {"wmax": True}])
+def test_bad_params_raise(kwargs: dict) -> None:
+    with pytest.raises(ParameterError):
+        RoadmapParams(**kwargs)
+
+
+def test_bad_arguments_raise() -> None:
+    corridor = straight(50.0)
+    with pytest.raises(ParameterError):
+        plan_roadmap(corridor, Obstacles.empty(), (0, 0), params={"d": 1.0})  # type: ignore
+    with pytest.raises(GeometryError):
+        plan_roadmap(corridor, [np.zeros((4, 2))], (0, 0))  # type: ignore[arg-type]
+    with pytest.raises(GeometryError):
+        plan_roadmap(np.zeros((5, 2)), Obstacles.empty(), (0, 0))  # type: ignore
+    for bad in [(0.0,), (0.0, np.nan), (1.0, 2.0, 3.0)]:
+        with pytest.raises(GeometryError):
+            plan_roadmap(corridor, Obstacles.empty(), bad)
+
+
+@pytest.mark.parametrize(("start", "ok"), [
+    ((-5.0, 0.0), False), ((55.0, 0.0), False), ((10.0, 8.0), False), ((10.0, -7.9), False),
+    ((10.0, 6.5), True), ((0.0, 0.0), True), ((50.0, 0.0), True)])
+def test_start_off_the_corridor(start: tuple[float, float], ok: bool) -> None:
+    corridor = straight(50.0)
+    if ok:
+        rm = plan_roadmap(corridor, Obstacles.empty(), start)
+        assert rm.s[0] == pytest.approx(np.ceil(start[0]))
+    else:
+        with pytest.raises(GeometryError, match=r"station|off the road"):
+            plan_roadmap(corridor, Obstacles.empty(), start)
+
+
+def test_start_inside_a_grown_obstacle_still_plans() -> None:
+    corridor = straight(60.0)
+    obs = Obstacles.from_boxes([[5.0, 1.5]], [0.0], [4.5], [1.8])
+    rm = plan_roadmap(corridor, obs, (5.0, -0.5))  # 1.1 m from the car: inside r = 1.2
+    assert rm.s[0] == 5.0 and rm.l[0] == pytest.approx((-3.6 - 0.6) / 2)
+
+
+def test_malformed_obstacles_raise() -> None:
+    with pytest.raises(GeometryError):
+        Obstacles.from_polygons([np.zeros((2, 2))])
+    with pytest.raises(GeometryError):
+        Obstacles.from_polygons([np.array([[0, 0], [1, 0], [np.nan, 1]])])
+    with pytest.raises(GeometryError):
+        Obstacles.from_boxes([[0.0, 0.0]], [0.0], [-1.0], [1.0])

@@ -1,0 +1,380 @@
+"""Closed loop in the real SUMO (libsumo): bundled scenarios end to end, obstacles read from
+SUMO, re-routing, appearing obstacles, and clear errors with the record written out."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Iterator
+from pathlib import Path
+
+import libsumo
+import numpy as np
+import pytest
+import sumolib
+from conftest import NETS, ROOT
+from shapely.geometry import Polygon
+
+from splineplan.errors import (
+    ScenarioError,
+    SimulationError,
+    UnknownEdgeError,
+    VehicleClassError,
+)
+from splineplan.metrics import box_distances, footprint
+from splineplan.network import load_network, route_corridor
+from splineplan.roadmap import RoadmapParams, plan_roadmap
+from splineplan.route import shortest_route
+from splineplan.scenario import load_scenario
+from splineplan.sim import SimResult, simulate, stopped_vehicle_obstacles
+
+SCENARIOS = ROOT / "scenarios"
+BUNDLED = sorted(p.stem for p in SCENARIOS.glob("*.toml") if p.stem != "monaco")
+
+
+def _run(name: str, out: Path, **kw: object) -> SimResult:
+    return simulate(load_scenario(SCENARIOS / f"{name}.toml"), out_dir=out, progress=False,
+                    **kw)  # type: ignore[arg-type]
+
+
+def _fcd(path: Path) -> dict[float, dict[str, tuple[float, float, float, float]]]:
+    """SUMO's own record: per time, per vehicle (x, y, angle, speed) of the front bumper."""
+    out: dict[float, dict[str, tuple[float, float, float, float]]] = {}
+    for step in ET.parse(path).getroot().iter("timestep"):
+        t = round(float(step.get("time", "nan")), 3)
+        out[t] = {v.get("id", ""): (float(v.get("x", "nan")), float(v.get("y", "nan")),
+                                    float(v.get("angle", "nan")), float(v.get("speed", "nan")))
+                  for v in step.iter("vehicle")}
+    return out
+
+
+def _sumo_box(x: float, y: float, angle: float, length: float, width: float) -> Polygon:
+    """A vehicle's rectangle from SUMO's front-bumper position and navigational angle,
+    computed here without the package's geometry."""
+    a = math.radians(angle)
+    fwd = np.array([math.sin(a), math.cos(a)])  # 0 = north, clockwise
+    left = np.array([-fwd[1], fwd[0]])
+    front = np.array([x, y])
+    rear = front - length * fwd
+    pts = [rear - width / 2 * left, front - width / 2 * left, front + width / 2 * left,
+           rear + width / 2 * left]
+    return Polygon(pts)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[str, SimResult]:
+    """Every bundled scenario (Monaco aside), run once for the whole module."""
+    base = tmp_path_factory.mktemp("runs")
+    return {name: _run(name, base / name) for name in BUNDLED}
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+def test_bundled_scenario_end_to_end(runs: dict[str, SimResult], name: str) -> None:
+    r = runs[name]
+    m = r.metrics
+    assert r.arrived, r.reason
+    assert m["status"] == "arrived" and m["arrived"] is True
+    assert m["collisions"] == 0, m["collision_events"][:3]
+    assert m["time_off_road"] == 0.0
+    margin = m["safety_margin"]
+    if m["min_clearance_obstacles"] is not None:
+        assert m["min_clearance_obstacles"] >= margin - 1e-6
+    assert m["position_error_max"] < 1e-3  # SUMO put the ego where the plan said
+    assert m["route"][-1] == load_scenario(SCENARIOS / f"{name}.toml").ego.goal_edge
+    assert m["distance"] > 0.9 * m["route_length"] - 30.0
+    assert m["planning_time"]["count"] == m["replan_count"] >= 1
+    for f in ("metrics.json", "trajectory.csv", "fcd.xml"):
+        assert (r.out_dir / f).stat().st_size > 0
+    on_disk = json.loads((r.out_dir / "metrics.json").read_text())
+    assert on_disk["status"] == "arrived" and on_disk["seed"] == m["seed"]
+
+
+@pytest.mark.parametrize("name", ["one_obstacle", "obstacle_field_d", "appearing_obstacle"])
+def test_clearance_from_sumo_record(runs: dict[str, SimResult], name: str) -> None:
+    """Independent of the loop's own checks: SUMO's FCD output, rectangles built here and
+    distances by shapely. The ego keeps the safety margin from every stopped vehicle."""
+    r = runs[name]
+    sc = load_scenario(SCENARIOS / f"{name}.toml")
+    sizes = {}
+    for rou in sc.routes:
+        root = ET.parse(rou).getroot()
+        types = {t.get("id"): (float(t.get("length", "5")), float(t.get("width", "1.8")))
+                 for t in root.iter("vType")}
+        sizes.update({v.get("id"): types[v.get("type")] for v in root.iter("vehicle")})
+    fcd = _fcd(r.out_dir / "fcd.xml")
+    best = math.inf
+    seen = 0
+    for vehicles in fcd.values():
+        if "ego" not in vehicles:
+            continue
+        ego = _sumo_box(*vehicles["ego"][:3], sc.ego.length, sc.ego.width)
+        for vid, (x, y, angle, speed) in vehicles.items():
+            if vid == "ego" or speed > 0.1:
+                continue
+            seen += 1
+            best = min(best, ego.distance(_sumo_box(x, y, angle, *sizes[vid])))
+    assert seen > 0
+    assert best >= sc.roadmap.safety_margin - 1e-3
+    assert best == pytest.approx(r.metrics["min_clearance_obstacles"], abs=0.05)
+
+
+def test_driven_path_matches_sumo_record(runs: dict[str, SimResult]) -> None:
+    """The trajectory.csv centre poses, moved to the front bumper, are SUMO's positions."""
+    r = runs["obstacle_field_c"]
+    fcd = _fcd(r.out_dir / "fcd.xml")
+    with (r.out_dir / "trajectory.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) > 100
+    worst = 0.0
+    compared = 0
+    for row in rows[::10]:
+        # SUMO labels an FCD time step with the time at its start; getTime() after the step
+        # (our rows' t) is one step later
+        t = round(float(row["t"]) - 0.1, 3)
+        if t not in fcd or "ego" not in fcd[t]:
+            continue
+        h = float(row["heading"])
+        front = np.array([float(row["x"]), float(row["y"])]) + 2.25 * np.array(
+            [math.cos(h), math.sin(h)])
+        x, y, angle, _ = fcd[t]["ego"]
+        worst = max(worst, float(np.hypot(*(front - [x, y]))))
+        compared += 1
+        # SUMO's sublane model recomputes the angle from the lateral motion: close, not equal
+        diff = (90.0 - math.degrees(h) - angle + 180.0) % 360.0 - 180.0
+        assert abs(diff) < 3.0
+    assert compared > 30
+    assert worst < 0.01  # FCD rounds to 2 decimals
+
+
+def test_blocked_road_reroutes(runs: dict[str, SimResult]) -> None:
+    r = runs["blocked_road"]
+    reroutes = [p for p in r.replans if p.reason == "reroute"]
+    assert reroutes and "B1C1" in reroutes[0].detail
+    assert r.metrics["avoided_edges"] == ["B1C1"]
+    assert "B1C1" not in r.route and r.route[0] == "A1B1" and r.route[-1] == "C1D1"
+    # the ego turned off before the closed road: it never drove on B1C1
+    net = sumolib.net.readNet(str(NETS / "grid.net.xml"))
+    lane = net.getLane("B1C1_0")
+    xy = np.column_stack((r.driven["x"], r.driven["y"]))
+    d = [sumolib.geomhelper.distancePointToPolygon(tuple(p), lane.getShape()) for p in xy]
+    assert min(d) > 3.0
+
+
+def test_appearing_obstacle_replans_in_time(runs: dict[str, SimResult]) -> None:
+    r = runs["appearing_obstacle"]
+    hits = [p for p in r.replans if p.reason == "obstacles" and "appearing" in p.detail]
+    assert hits, [(p.time, p.reason, p.detail) for p in r.replans]
+    assert 18.0 <= hits[0].time <= 18.5  # the car enters at t = 18 s
+    assert hits[0].ok
+    # the ego was driving when the car appeared, and drove past it
+    i = int(np.searchsorted(r.driven["t"], 18.0))
+    assert r.driven["speed"][i] > 10.0
+    assert r.metrics["min_clearance_obstacles"] >= 0.3 - 1e-6
+
+
+def test_moving_traffic_slows_the_ego(runs: dict[str, SimResult]) -> None:
+    free = runs["empty_road"].metrics["travel_time"]
+    busy = runs["moving_traffic"]
+    assert busy.metrics["travel_time"] > free + 5.0
+    assert busy.driven["speed_limited"].sum() > 50
+    assert busy.metrics["min_clearance_vehicles"] > 0.5
+
+
+def test_city_scenario_drives_the_level1_route(runs: dict[str, SimResult]) -> None:
+    r = runs["city"]
+    net = load_network(NETS / "city.net.xml")
+    sc = load_scenario(SCENARIOS / "city.toml")
+    route = shortest_route(net, sc.ego.start_edge, sc.ego.goal_edge, start_pos=sc.ego.start_pos)
+    assert r.route == route.edges and "bridge_east" in r.route
+    assert r.metrics["route_length"] == pytest.approx(route.length)
+    assert r.metrics["depart_time"] == pytest.approx(sc.ego.depart + 0.1)
+
+
+@pytest.mark.slow
+def test_monaco_end_to_end(monaco_net: Path, tmp_path: Path) -> None:
+    r = _run("monaco", tmp_path)
+    assert r.arrived, r.reason
+    assert r.metrics["collisions"] == 0
+
+
+def test_monaco_missing_is_a_clear_error(tmp_path: Path) -> None:
+    text = (SCENARIOS / "monaco.toml").read_text().replace("../../shared/data/",
+                                                           "../no_such_folder/")
+    p = tmp_path / "scen" / "monaco.toml"
+    p.parent.mkdir()
+    p.write_text(text)
+    with pytest.raises(ScenarioError, match=r"network file not found: .*monaco\.net\.xml\.gz"):
+        load_scenario(p)
+
+
+# ---- obstacles read from SUMO ------------------------------------------------------------
+
+@pytest.fixture()
+def grid_sumo() -> Iterator[None]:
+    libsumo.start(["sumo", "-n", str(NETS / "city.net.xml"), "--no-step-log", "true"])
+    try:
+        yield
+    finally:
+        libsumo.close()
+
+
+def test_stopped_vehicles_become_obstacles(grid_sumo: None) -> None:
+    # B0B1, B1C1 and C1D1 are slanted: the angle convention matters
+    net = sumolib.net.readNet(str(NETS / "city.net.xml"))
+    placed = {"s0": ("B1C1", 0, 40.0, 4.5, 1.8), "s1": ("B0B1", 0, 25.0, 12.0, 2.5),
+              "s2": ("C1D1", 1, 70.0, 6.0, 2.1)}
+    for vid, (edge, lane, pos, length, width) in placed.items():
+        libsumo.vehicletype.copy("DEFAULT_VEHTYPE", f"t_{vid}")
+        libsumo.vehicletype.setLength(f"t_{vid}", length)
+        libsumo.vehicletype.setWidth(f"t_{vid}", width)
+        libsumo.route.add(f"r_{vid}", [edge])
+        libsumo.vehicle.add(vid, f"r_{vid}", typeID=f"t_{vid}", departPos=str(pos),
+                            departLane=str(lane), departSpeed="0")
+        libsumo.vehicle.setStop(vid, edge, pos=pos, laneIndex=lane, duration=1000.0)
+    libsumo.route.add("r_mover", ["B1C1", "C1D1"])
+    libsumo.vehicle.add("mover", "r_mover", departSpeed="10")
+    for _ in range(10):
+        libsumo.simulationStep()
+    obs = stopped_vehicle_obstacles(libsumo)
+    assert set(obs.ids) == set(placed)  # the moving car is no obstacle
+    for i, vid in enumerate(obs.ids):
+        edge, lane, _, length, width = placed[vid]
+        poly = Polygon(obs.polygon(i))
+        assert poly.area == pytest.approx(length * width)
+        # SUMO's position is the middle of the front bumper, its angle 0 = north, clockwise
+        fx, fy = libsumo.vehicle.getPosition(vid)
+        ang = math.radians(libsumo.vehicle.getAngle(vid))
+        corners = obs.polygon(i)
+        front_mid = corners[1:3].mean(axis=0)  # corners run from rear right, counter-clockwise
+        assert front_mid == pytest.approx([fx, fy], abs=1e-6)
+        axis = corners[1] - corners[0]
+        assert axis / np.linalg.norm(axis) == pytest.approx([math.sin(ang), math.cos(ang)],
+                                                            abs=1e-9)
+        # independent: the rectangle's centre is on the lane's centre line (sumolib), half
+        # a length behind SUMO's lane position
+        shape = net.getLane(f"{edge}_{lane}").getShape()
+        lane_pos = libsumo.vehicle.getLanePosition(vid)
+        cx, cy = sumolib.geomhelper.positionAtShapeOffset(shape, lane_pos - length / 2.0)
+        assert np.array(poly.centroid.coords[0]) == pytest.approx([cx, cy], abs=0.05)
+        assert _sumo_box(fx, fy, libsumo.vehicle.getAngle(vid), length, width).symmetric_difference(
+            poly).area < 1e-6
+    # a roadmap along B1C1 and C1D1 (two lanes each) passes them
+    mine = load_network(NETS / "city.net.xml")
+    route = shortest_route(mine, "B1C1", "C1D1")
+    corridor = route_corridor(mine, route)
+    params = RoadmapParams(d=1.0, safety_margin=0.3)
+    start = corridor.to_xy([3.0], [0.0])[0]
+    rm = plan_roadmap(corridor, obs, start, params)
+    path = np.asarray(rm.xy)
+    for i in range(len(obs)):
+        poly = Polygon(obs.polygon(i))
+        d = [poly.distance(Polygon(footprint(p, 0.0, 1e-3, 1e-3))) for p in path]
+        assert min(d) >= params.inflation - 1e-6
+
+
+def test_box_distances_match_shapely() -> None:
+    rng = np.random.default_rng(7)
+    a = footprint([0.0, 0.0], 0.4, 4.5, 1.8)
+    others = np.stack([footprint(rng.uniform(-8, 8, 2), rng.uniform(-3, 3),
+                                 rng.uniform(1, 12), rng.uniform(0.5, 3)) for _ in range(300)])
+    want = [Polygon(a).distance(Polygon(b)) for b in others]
+    assert box_distances(a, others) == pytest.approx(want, abs=1e-9)
+    # crossing without a corner inside, and containment
+    cross = footprint([0, 0], math.pi / 2, 10, 1)
+    inner = footprint([0, 0], 0.0, 1, 0.5)
+    assert box_distances(footprint([0, 0], 0, 10, 1), np.stack([cross, inner])).tolist() == [0, 0]
+
+
+# ---- bad input and failures: a clear error, and the record written ------------------------
+
+def _status(out: Path) -> dict[str, object]:
+    m: dict[str, object] = json.loads((out / "metrics.json").read_text())
+    assert (out / "trajectory.csv").exists()
+    return m
+
+
+def test_missing_network(tmp_path: Path) -> None:
+    sc = load_scenario(SCENARIOS / "empty_road.toml")
+    bad = dataclasses.replace(sc, network=tmp_path / "gone.net.xml")
+    with pytest.raises(ScenarioError, match=r"gone\.net\.xml"):
+        simulate(bad, out_dir=tmp_path / "out", progress=False)
+    m = _status(tmp_path / "out")
+    assert m["status"] == "failed" and "gone.net.xml" in str(m["reason"])
+
+
+def test_unknown_edge(tmp_path: Path) -> None:
+    sc = load_scenario(SCENARIOS / "empty_road.toml")
+    bad = dataclasses.replace(sc, ego=dataclasses.replace(sc.ego, goal_edge="nowhere"))
+    with pytest.raises(UnknownEdgeError, match="'nowhere'"):
+        simulate(bad, out_dir=tmp_path, progress=False)
+    assert _status(tmp_path)["status"] == "failed"
+
+
+def test_start_edge_forbidden_to_the_class(tmp_path: Path) -> None:
+    sc = load_scenario(SCENARIOS / "city.toml")
+    bad = dataclasses.replace(sc, ego=dataclasses.replace(sc.ego, start_edge="bike_A2B3"))
+    with pytest.raises(VehicleClassError, match="bike_A2B3"):
+        simulate(bad, out_dir=tmp_path, progress=False)
+    assert "bike_A2B3" in str(_status(tmp_path)["reason"])
+
+
+def test_ego_removed_by_someone_else(tmp_path: Path) -> None:
+    sc = load_scenario(SCENARIOS / "one_obstacle.toml")
+
+    def remove(t: float) -> None:
+        if abs(t - 5.0) < 1e-6:
+            libsumo.vehicle.remove(sc.ego.id)
+
+    with pytest.raises(SimulationError, match="'ego' left the simulation at t=5"):
+        simulate(sc, out_dir=tmp_path, progress=False, on_step=remove)
+    m = _status(tmp_path)
+    assert m["status"] == "failed" and "left the simulation" in str(m["reason"])
+    with (tmp_path / "trajectory.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert 40 <= len(rows) <= 50 and float(rows[-1]["t"]) <= 5.0
+    # libsumo was closed: a new run starts
+    libsumo.start(["sumo", "-n", str(NETS / "straight.net.xml"), "--no-step-log", "true"])
+    libsumo.close()
+
+
+@pytest.mark.parametrize(("content", "needle"), [
+    ("<additional><poly id='p' </additional>", "not well-formed XML"),
+    ("<additional><busStop id='b' lane='no_lane' startPos='0' endPos='10'/></additional>",
+     "SUMO failed to start"),
+])
+def test_sumo_failing_to_start(tmp_path: Path, content: str, needle: str) -> None:
+    add = tmp_path / "bad.add.xml"
+    add.write_text(content)
+    sc = load_scenario(SCENARIOS / "empty_road.toml")
+    bad = dataclasses.replace(sc, additional=(add,))
+    with pytest.raises(SimulationError, match=needle):
+        simulate(bad, out_dir=tmp_path / "out", progress=False)
+    m = _status(tmp_path / "out")
+    assert m["status"] == "failed" and needle in str(m["reason"])
+
+
+def test_sumo_driver_baseline(tmp_path: Path) -> None:
+    r = _run("empty_road", tmp_path, driver="sumo")
+    assert r.arrived and r.metrics["driver"] == "sumo" and r.metrics["replan_count"] == 0
+    assert r.metrics["distance"] > 500.0
+
+
+def test_cli_simulate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from splineplan.cli import main
+
+    out = tmp_path / "run"
+    code = main(["simulate", str(SCENARIOS / "one_obstacle.toml"), "--out", str(out),
+                 "--seed", "5", "--plot", "--no-progress"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "one_obstacle: arrived" in text and "collisions 0" in text
+    assert json.loads((out / "metrics.json").read_text())["seed"] == 5
+    assert (out / "route.png").stat().st_size > 10_000
+    plans = sorted((out / "plans").glob("*.png"))
+    assert len(plans) >= 3
+    code = main(["simulate", str(tmp_path / "missing.toml")])
+    assert code == 2
+    assert "scenario file not found" in capsys.readouterr().err

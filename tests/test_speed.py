@@ -1,0 +1,55 @@
+"""Speed profile: forward/backward passes and times."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from splineplan.errors import ParameterError
+from splineplan.speed import allowed_speed, speed_profile, times_from_profile
+
+
+def test_allowed_speed_equation_1() -> None:
+    v = allowed_speed([0.0, 0.1, -0.1, 1.0], mu=0.7, g=9.81, s_max=13.89)
+    np.testing.assert_allclose(v, [13.89, np.sqrt(68.67), np.sqrt(68.67), np.sqrt(6.867)])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), v0=st.floats(0.0, 10.0),
+       end=st.one_of(st.none(), st.floats(0.0, 8.0)))
+def test_profile_respects_every_limit(seed: int, v0: float, end: float | None) -> None:
+    rng = np.random.default_rng(seed)
+    s = np.concatenate(([0.0], np.cumsum(rng.uniform(0.1, 1.0, 200))))
+    limit = rng.uniform(2.0, 14.0, len(s))
+    v = speed_profile(s, limit, a_max=2.0, b_max=4.0, start_speed=v0, end_speed=end)
+    assert np.all(v <= limit + 1e-9)
+    dv2 = np.diff(v**2) / (2 * np.diff(s))
+    assert dv2.max() <= 2.0 + 1e-9 and dv2.min() >= -4.0 - 1e-9
+    assert v[0] <= v0 + 1e-12
+    if end is not None:
+        assert v[-1] <= end + 1e-12
+    t = times_from_profile(s, v) if np.all(v[:-1] + v[1:] > 0) else None
+    if t is not None:
+        acc = np.diff(v) / np.diff(t)
+        assert acc.max() <= 2.0 + 1e-6 and acc.min() >= -4.0 - 1e-6
+
+
+def test_constant_acceleration_times_are_exact() -> None:
+    s = np.linspace(0.0, 50.0, 101)
+    v = np.sqrt(2 * 2.0 * s)
+    t = times_from_profile(s, v)
+    np.testing.assert_allclose(t, v / 2.0, atol=1e-12)
+
+
+def test_stop_and_errors() -> None:
+    s = np.linspace(0.0, 100.0, 201)
+    v = speed_profile(s, np.full(201, 10.0), a_max=2.0, b_max=4.0, end_speed=0.0)
+    assert v[-1] == 0.0 and v.max() == pytest.approx(10.0)
+    with pytest.raises(ParameterError):
+        speed_profile(s, np.ones(3), a_max=2.0, b_max=4.0)
+    with pytest.raises(ParameterError):
+        speed_profile(s, np.ones(201), a_max=0.0, b_max=4.0)
+    with pytest.raises(ParameterError):
+        times_from_profile([0.0, 1.0], [0.0, 0.0])
