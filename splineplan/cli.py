@@ -273,8 +273,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     from splineplan.roadmap import RoadmapParams
     from splineplan.trajectory import TrajectoryParams
 
+    from splineplan.obstacles import Obstacles
+
     net = load_network(args.net)
-    obstacles = read_obstacles(net, args.obstacles) if args.obstacles else None
+    obstacles = read_obstacles(net, args.obstacles) if args.obstacles else Obstacles.empty()
     rp = RoadmapParams() if args.d is None else RoadmapParams(d=args.d)
     tp = TrajectoryParams()
     if args.s_max is not None:
@@ -302,6 +304,47 @@ def _cmd_plan(args: argparse.Namespace) -> int:
           f"{1e3 * result.trajectory_seconds:.1f} ms")
     print(f"written to {out}/ (trajectory.csv, plan.json)"
           + (f" and {args.plot}" if args.plot else ""))
+    return 0
+
+
+def _add_bench(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="run a suite of scenarios with the planner and SUMO's "
+                                     "drivers, and compare",
+                       description="Run each case of a suite (bundled scenarios and seeded "
+                                   "obstacle fields on straight and curved roads) with the "
+                                   "splineplan ego, SUMO's default driver and SUMO's sublane "
+                                   "driver; write runs.csv, runs.json, summary.md and figures.")
+    p.add_argument("suite", metavar="SUITE", nargs="?", default="default",
+                   help="default, quick, fields, a scenario file or a folder of them (default)")
+    p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0..N-1 (1)")
+    p.add_argument("--workers", type=int, default=None, metavar="N",
+                   help="runs at a time on this machine (default: number of cores)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="run on a Dask cluster instead (needs splineplan[dask])")
+    p.add_argument("--out", default="bench_out", metavar="DIR", help="output folder (bench_out)")
+    p.add_argument("--tiers", nargs="+", metavar="TIER",
+                   help="only these tiers: bundled, empty, sparse, medium, dense, blocked")
+    p.add_argument("--drivers", nargs="+", default=None, metavar="DRIVER",
+                   help="planner, sumo, sublane (all)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_bench)
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from splineplan.bench import DRIVERS, build_suite, run_suite, summarise
+
+    cases = build_suite(args.suite, seeds=args.seeds, tiers=args.tiers, out_dir=args.out)
+    res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
+                    workers=args.workers, scheduler=args.scheduler,
+                    progress=not args.no_progress)
+    for s in summarise(res.rows):
+        print(f"{s['tier']:>8} {s['driver']:>8}: {s['arrived']}/{s['runs']} arrived")
+    failed = [r for r in res.rows if r["error"]]
+    for r in failed:
+        print(f"failed: {r['case']} ({r['driver']}): {r['error']}")
+    print(f"{len(res.cases)} cases, {len(res.rows)} runs in {res.wall_time:.1f} s on "
+          f"{res.executor}: {res.cases_per_minute:.1f} cases/min")
+    print(f"written to {args.out}/ (runs.csv, runs.json, summary.md, figures)")
     return 0
 
 

@@ -78,18 +78,23 @@ class Corridor:
         edges: tuple[str, ...] = (),
         edge_starts: ArrayLike = (),
         offset: float = 0.0,
+        reference: ArrayLike | None = None,
     ) -> Corridor:
         """Corridor between a left and a right boundary polyline, each ``(n, 2)`` [m].
 
-        Both run in the direction of travel. The reference line is their midline.
+        Both run in the direction of travel. The reference line is their midline, or
+        ``reference`` ``(k, 2)`` where given; the boundaries' offsets are measured from it.
         """
         lb = _as_polyline(left, "left boundary")
         rb = _as_polyline(right, "right boundary")
-        n = max(len(resample_polyline(lb, REFERENCE_SPACING)),
-                len(resample_polyline(rb, REFERENCE_SPACING)))
-        lr = _resample_n(lb, n)
-        rr = _resample_n(rb, n)
-        mid = resample_polyline((lr + rr) / 2.0, REFERENCE_SPACING)
+        if reference is not None:
+            mid = resample_polyline(_as_polyline(reference, "reference"), REFERENCE_SPACING)
+        else:
+            n = max(len(resample_polyline(lb, REFERENCE_SPACING)),
+                    len(resample_polyline(rb, REFERENCE_SPACING)))
+            lr = _resample_n(lb, n)
+            rr = _resample_n(rb, n)
+            mid = resample_polyline((lr + rr) / 2.0, REFERENCE_SPACING)
         ref_s = polyline_stations(mid)
         probe = cls(mid, ref_s, np.full(len(mid), 1e9), np.full(len(mid), -1e9))
         left_off = probe._offsets_of(resample_polyline(lb, REFERENCE_SPACING / 2))

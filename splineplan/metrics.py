@@ -87,23 +87,67 @@ def _convex_contains_one(poly: FloatArray, pts: FloatArray) -> np.ndarray:
     return np.asarray(inside.reshape(k, 4))
 
 
-def dynamics(t: ArrayLike, heading: ArrayLike, speed: ArrayLike) -> dict[str, FloatArray]:
-    """Longitudinal and lateral acceleration [m/s^2] and jerk [m/s^3] of a driven path.
+#: Default span [m] of the second difference that gives the driven path's curvature.
+CURVATURE_SPAN = 2.0
 
-    ``t`` ``(n,)`` [s], ``heading`` ``(n,)`` [rad], ``speed`` ``(n,)`` [m/s]. The lateral
-    acceleration is ``v * dheading/dt``; jerk is the rate of change of the acceleration
-    vector ``(a_lon, a_lat)`` in the vehicle's frame.
+
+def path_curvature(x: ArrayLike, y: ArrayLike, *, span: float = CURVATURE_SPAN) -> FloatArray:
+    """Signed curvature [1/m] of a driven path at each of its samples, from positions only.
+
+    The paper's equation (2) on the path itself: with ``P(s)`` the path at arc length ``s``
+    (linear between samples), ``kappa(s) = |P(s + h) + P(s - h) - 2 P(s)| / h^2``, positive
+    for left turns. ``h`` is ``span`` [m], or twice the largest distance between consecutive
+    samples where that is longer (a span near the sample spacing would see the polyline's
+    corners instead of the curve). Near the ends, ``s`` is clamped to
+    ``[h, L - h]``. Samples where the vehicle stands share its curvature there.
+
+    ``x``, ``y``: ``(n,)`` [m]. Returns ``(n,)``; zeros for a path shorter than ``2 h``.
+    """
+    xs = np.asarray(x, dtype=float)
+    ys = np.asarray(y, dtype=float)
+    n = len(xs)
+    if n < 3:
+        return np.zeros(n)
+    step = np.hypot(np.diff(xs), np.diff(ys))
+    s = np.concatenate(([0.0], np.cumsum(step)))
+    h = max(float(span), 2.0 * float(step.max()))
+    if s[-1] < 2.0 * h:
+        return np.zeros(n)
+    # distinct stations only (the vehicle standing adds samples at one station)
+    keep = np.concatenate(([True], step > 1e-9))
+    sk, xk, yk = s[keep], xs[keep], ys[keep]
+    c = np.clip(s, h, s[-1] - h)
+    px = [np.interp(c + k * h, sk, xk) for k in (-1, 0, 1)]
+    py = [np.interp(c + k * h, sk, yk) for k in (-1, 0, 1)]
+    ddx = px[2] + px[0] - 2.0 * px[1]
+    ddy = py[2] + py[0] - 2.0 * py[1]
+    turn = np.sign((px[1] - px[0]) * (py[2] - py[1]) - (py[1] - py[0]) * (px[2] - px[1]))
+    return np.asarray(turn * np.hypot(ddx, ddy) / (h * h))
+
+
+def dynamics(
+    t: ArrayLike, x: ArrayLike, y: ArrayLike, speed: ArrayLike, *,
+    span: float = CURVATURE_SPAN,
+) -> dict[str, FloatArray]:
+    """Curvature, accelerations and jerk of a driven path, from its samples.
+
+    ``t`` ``(n,)`` [s], ``x``, ``y`` ``(n,)`` [m] (the vehicle's centre), ``speed`` ``(n,)``
+    [m/s]. Lateral acceleration [m/s^2] is ``v^2 * kappa`` with ``kappa`` from
+    :func:`path_curvature` (positions only, over ``span`` [m] of path: independent of the
+    headings the vehicle reported). Longitudinal acceleration is ``dv/dt`` and jerk
+    [m/s^3] is the rate of change of ``(a_lon, a_lat)``, both by central differences in
+    time (``numpy.gradient``).
     """
     tt = np.asarray(t, dtype=float)
     v = np.asarray(speed, dtype=float)
     if len(tt) < 3 or np.any(np.diff(tt) <= 0):
         z = np.zeros(len(tt))
-        return {"a_lon": z, "a_lat": z, "jerk": z}
-    yaw_rate = np.gradient(np.unwrap(np.asarray(heading, dtype=float)), tt)
-    a_lat = v * yaw_rate
+        return {"curvature": z, "a_lon": z, "a_lat": z, "jerk": z}
+    kappa = path_curvature(x, y, span=span)
+    a_lat = v * v * kappa
     a_lon = np.gradient(v, tt)
     jerk = np.hypot(np.gradient(a_lon, tt), np.gradient(a_lat, tt))
-    return {"a_lon": a_lon, "a_lat": a_lat, "jerk": jerk}
+    return {"curvature": kappa, "a_lon": a_lon, "a_lat": a_lat, "jerk": jerk}
 
 
 def summary_stats(values: ArrayLike) -> dict[str, Any]:

@@ -44,7 +44,7 @@ from splineplan.errors import (
     UnknownEdgeError,
     VehicleClassError,
 )
-from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations
+from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations, resample_polyline
 from splineplan.obstacles import Obstacles
 
 log = logging.getLogger(__name__)
@@ -451,22 +451,51 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
             lw = network.internal_lanes[left.via[0]].width
             if len(rshape) >= 2 and len(lshape) >= 2:
                 pieces.append(_band(rshape, rw, lshape, lw))
-    refs, lefts, rights, edge_starts = [], [], [], []
-    station = 0.0
-    last: FloatArray | None = None
-    for k, (ref, lo, ro) in enumerate(pieces):
-        if last is not None:
-            station += float(np.hypot(*(ref[0] - last)))
-        if k in starts:
-            edge_starts.append(station)
-        refs.append(ref)
-        lefts.append(lo)
-        rights.append(ro)
-        station += float(polyline_stations(ref)[-1])
-        last = ref[-1]
-    ref_all = np.concatenate(refs)
-    return Corridor.from_reference(ref_all, np.concatenate(lefts), np.concatenate(rights),
-                                   edges=edges, edge_starts=np.asarray(edge_starts))
+    # Boundaries of each piece, joined; the reference line is the pieces' midlines joined
+    # and smoothed, so that where the drivable width changes (a one-lane junction into a
+    # two-lane edge) the reference bends gently instead of stepping sideways.
+    lefts, rights, mids, first = [], [], [], []
+    for ref, lo, ro in pieces:
+        normal = _vertex_normals(ref)
+        lefts.append(ref + lo[:, None] * normal)
+        rights.append(ref + ro[:, None] * normal)
+        mids.append(ref)
+        first.append(ref[0])
+    reference = _smooth_polyline(dedupe_polyline(np.concatenate(mids)), REFERENCE_SMOOTHING)
+    probe = Corridor.from_boundaries(np.concatenate(lefts), np.concatenate(rights),
+                                     reference=reference)
+    starts_s = probe.to_sl(np.array([first[k] for k in starts]))[:, 0]
+    starts_s[0] = 0.0
+    starts_s = np.maximum.accumulate(np.clip(starts_s, 0.0, probe.length))
+    return Corridor(probe.reference, probe.s, probe.left, probe.right, edges, starts_s)
+
+
+#: Standard deviation [m] of the Gaussian that smooths a route corridor's reference line.
+REFERENCE_SMOOTHING = 2.0
+
+
+def _vertex_normals(points: FloatArray) -> FloatArray:
+    """Unit left normals ``(n, 2)`` at a polyline's vertices (mean of adjacent segments)."""
+    d = np.diff(points, axis=0)
+    d /= np.hypot(*d.T)[:, None]
+    t = np.concatenate((d[:1], d[:-1] + d[1:], d[-1:]))
+    t /= np.maximum(np.hypot(*t.T), 1e-12)[:, None]
+    return np.column_stack((-t[:, 1], t[:, 0]))
+
+
+def _smooth_polyline(points: FloatArray, sigma: float) -> FloatArray:
+    """Polyline resampled every 0.5 m and smoothed by a Gaussian of ``sigma`` [m].
+
+    The end points stay where they are.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    pts = resample_polyline(points, 0.5)
+    if len(pts) < 5:
+        return pts
+    out = gaussian_filter1d(pts, sigma / 0.5, axis=0, mode="nearest")
+    out[0], out[-1] = pts[0], pts[-1]
+    return out
 
 
 def _via_shape(network: RoadNetwork, via: tuple[str, ...]) -> FloatArray:
@@ -543,7 +572,11 @@ def read_obstacles(network: RoadNetwork, path: str | Path) -> Obstacles:
         ids.append(el.get("id", f"poly{len(ids)}"))
     vtypes = {el.get("id"): el for el in root.iter("vType")}
     lanes = {ln.id: ln for lns in network.lanes for ln in lns}
-    pos, head, lengths, widths, vids = [], [], [], [], []
+    pos: list[FloatArray] = []
+    head: list[float] = []
+    lengths: list[float] = []
+    widths: list[float] = []
+    vids: list[str] = []
     for veh in root.iter("vehicle"):
         for stop in veh.iter("stop"):
             lane_id = stop.get("lane")

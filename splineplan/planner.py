@@ -102,15 +102,10 @@ def plan_corridor(
     roadmaps: list[Roadmap] = []
     parts: list[Trajectory] = []
     t_roadmap = t_traj = 0.0
-    extra = max(rp.vehicle_length - rp.vehicle_width, 0.0) / 2.0
     for i, seg in enumerate(pieces):
         seg_obs = obstacles.near(seg.polygon(), 0.0) if len(obstacles) else obstacles
         t0 = time.perf_counter()
-        grown = seg_obs
-        if len(seg_obs) and extra > 0:
-            centroids = np.array([p.mean(axis=0) for p in seg_obs.polygons()])
-            grown = seg_obs.elongated(seg.heading_at(seg.to_sl(centroids)[:, 0]), extra)
-        rm = plan_roadmap(seg, grown, pose, rp)
+        rm = plan_roadmap(seg, elongate_for_roadmap(seg, seg_obs, rp), pose, rp)
         t1 = time.perf_counter()
         tr = plan_trajectory(rm, seg, seg_obs, tp, heading, start_speed=speed,
                              end_speed=None)
@@ -135,6 +130,17 @@ def plan_corridor(
     joined = _join(parts, tp, start_speed, end_speed)
     t_traj += time.perf_counter() - t2
     return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
+
+
+def elongate_for_roadmap(corridor: Corridor, obstacles: Obstacles,
+                         params: RoadmapParams) -> Obstacles:
+    """Obstacles lengthened along the road by ``(vehicle_length - vehicle_width) / 2`` [m]
+    at each end, for level 2's disc model of the vehicle (see the module docstring)."""
+    extra = max(params.vehicle_length - params.vehicle_width, 0.0) / 2.0
+    if not len(obstacles) or extra <= 0:
+        return obstacles
+    centroids = np.array([p.mean(axis=0) for p in obstacles.polygons()])
+    return obstacles.elongated(corridor.heading_at(corridor.to_sl(centroids)[:, 0]), extra)
 
 
 def _head(tr: Trajectory, n: int) -> Trajectory:

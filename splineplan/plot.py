@@ -472,3 +472,125 @@ def plot_run_folder(
     _save(ax2, p)
     written.append(str(p))
     return written
+
+
+# ---- scenario bench ------------------------------------------------------------------------
+
+#: Colour and marker of each bench driver.
+BENCH_STYLE = {
+    "planner": ("#1565c0", "o", "splineplan"),
+    "sumo": ("#c62828", "s", "SUMO default"),
+    "sublane": ("#2e7d32", "^", "SUMO sublane"),
+}
+
+
+def plot_bench(
+    rows: Sequence[Mapping[str, Any]],
+    out_dir: str | PathLike[str],
+    *,
+    fmt: str = "png",
+) -> list[str]:
+    """Figures of a scenario bench (rows of ``runs.csv``, :mod:`splineplan.bench`).
+
+    Writes ``bench_success.<fmt>`` (success rate [%] against obstacle density, per driver),
+    ``bench_clearance.<fmt>`` (each run's minimum clearance [m] against density, with the
+    median per tier) and ``bench_travel_time.<fmt>`` (travel time [s] of the runs that
+    arrived, by tier and driver). Density: stopped vehicles per 100 m of road; only the
+    generated fields have one. Returns the files written.
+    """
+    out = Path(out_dir)
+    drivers = list(dict.fromkeys(str(r["driver"]) for r in rows))
+    tiers = list(dict.fromkeys(str(r["tier"]) for r in rows))
+    gen = [r for r in rows if r.get("density") is not None]
+    written = []
+
+    def style(d: str) -> tuple[str, str, str]:
+        return BENCH_STYLE.get(d, ("0.3", "x", d))
+
+    # success rate against density: one point per (driver, tier), at the tier's mean density
+    ax = Figure(figsize=(7.0, 4.5), layout="constrained").add_subplot()
+    for d in drivers:
+        pts = []
+        for t in tiers:
+            sel = [r for r in gen if r["driver"] == d and r["tier"] == t]
+            if sel:
+                pts.append((float(np.mean([float(r["density"]) for r in sel])),
+                            100.0 * float(np.mean([bool(r["arrived"]) for r in sel])), t))
+        if not pts:
+            continue
+        pts.sort()
+        c, m, name = style(d)
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], color=c, marker=m, lw=1.5,
+                ls=("-", "--", ":")[drivers.index(d) % 3], ms=9 - 2 * drivers.index(d),
+                label=name, gid=f"success_{d}")
+        if d == drivers[0]:
+            for px, _, t in pts:
+                ax.annotate(t, (px, 103.0), ha="center", fontsize="x-small", color="0.35")
+    ax.set_ylim(-5.0, 110.0)
+    ax.set_xlabel("obstacle density [stopped vehicles per 100 m]")
+    ax.set_ylabel("success rate [%]")
+    ax.set_title("Runs that arrived, by obstacle density")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(loc="lower left", fontsize="small")
+    p = out / f"bench_success.{fmt}"
+    _save(ax, p)
+    written.append(str(p))
+
+    # clearance against density: every run, plus the median per (driver, tier)
+    ax = Figure(figsize=(7.0, 4.5), layout="constrained").add_subplot()
+    for k, d in enumerate(drivers):
+        sel = [r for r in gen if r["driver"] == d and r.get("min_clearance") is not None]
+        if not sel:
+            continue
+        c, m, name = style(d)
+        x = np.array([float(r["density"]) for r in sel])
+        y = np.array([float(r["min_clearance"]) for r in sel])
+        jitter = (k - (len(drivers) - 1) / 2.0) * 0.06
+        ax.scatter(x + jitter, y, color=c, marker=m, s=18, alpha=0.45, gid=f"clearance_{d}",
+                   label=f"{name}: each run")
+        med = sorted({(float(np.mean(x[[r['tier'] == t for r in sel]])),
+                       float(np.median(y[[r['tier'] == t for r in sel]])))
+                      for t in tiers if any(r["tier"] == t for r in sel)})
+        ax.plot([q[0] for q in med], [q[1] for q in med], color=c, lw=1.5,
+                label=f"{name}: median per tier")
+    ax.axhline(0.0, color="k", lw=0.8)
+    ax.set_xlabel("obstacle density [stopped vehicles per 100 m]")
+    ax.set_ylabel("minimum clearance to other vehicles [m]")
+    ax.set_title("Clearance by obstacle density")
+    ax.grid(True, lw=0.3, alpha=0.5)
+    ax.legend(loc="best", fontsize="small")
+    p = out / f"bench_clearance.{fmt}"
+    _save(ax, p)
+    written.append(str(p))
+
+    # travel time by tier and driver: box plots of the runs that arrived
+    ax = Figure(figsize=(max(6.0, 1.3 * len(tiers) * max(len(drivers), 1)), 4.5),
+                layout="constrained").add_subplot()
+    width = 0.8 / max(len(drivers), 1)
+    for k, d in enumerate(drivers):
+        c, _, name = style(d)
+        data, pos = [], []
+        for i, t in enumerate(tiers):
+            v = [float(r["travel_time"]) for r in rows if r["driver"] == d and r["tier"] == t
+                 and r.get("arrived") and r.get("travel_time") is not None]
+            if v:
+                data.append(v)
+                pos.append(i + (k - (len(drivers) - 1) / 2.0) * width)
+        if data:
+            bp = ax.boxplot(data, positions=pos, widths=width * 0.85, patch_artist=True,
+                            manage_ticks=False)
+            for patch in bp["boxes"]:
+                patch.set(facecolor=c, alpha=0.55, edgecolor=c)
+            for med_line in bp["medians"]:
+                med_line.set(color="k")
+        ax.plot([], [], color=c, lw=6, alpha=0.55, label=name)
+    ax.set_xticks(range(len(tiers)), tiers)
+    ax.set_xlabel("difficulty tier")
+    ax.set_ylabel("travel time of runs that arrived [s]")
+    ax.set_title("Travel time by tier")
+    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    ax.legend(loc="best", fontsize="small")
+    p = out / f"bench_travel_time.{fmt}"
+    _save(ax, p)
+    written.append(str(p))
+    return written

@@ -38,7 +38,7 @@ import xml.etree.ElementTree as ET
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
 
 import numpy as np
 
@@ -56,10 +56,10 @@ from splineplan.errors import (
 )
 from splineplan.geometry import FloatArray, heading_from_sumo_angle, sumo_angle_from_heading
 from splineplan.metrics import (
+    CURVATURE_SPAN,
     box_distances,
     dynamics,
     finite_or_none,
-    footprint,
     footprints,
     summary_stats,
 )
@@ -82,14 +82,23 @@ _ROAD_CACHE = 20.0
 _PATH_SPACING = 0.5
 #: Seconds between retries when no plan could be made.
 _RETRY_AFTER = 1.0
-#: Offsets (fractions of d) of the sweep lines tried before a road counts as blocked.
-_SWEEP_PHASES = (0.0, 0.5, 0.25, 0.75)
 #: Straight extension [m] of the path beyond the trajectory's end, to see what is in the way.
 _PATH_EXTENSION = 60.0
 #: Re-routes tried in one replan before giving up.
 _MAX_REROUTES = 5
 
-Driver = Literal["planner", "sumo"]
+#: Who drives the ego: ``planner`` (splineplan, through ``moveToXY``), ``sumo`` (SUMO's
+#: default car-following and lane-change models, lane-based: SUMO started without
+#: ``--lateral-resolution``) or ``sublane`` (SUMO's sublane model, which can shift within a
+#: lane to pass an obstacle: ``--lateral-resolution`` :data:`LATERAL_RESOLUTION`).
+Driver = Literal["planner", "sumo", "sublane"]
+DRIVERS: tuple[str, ...] = get_args(Driver)
+#: Width [m] of SUMO's sublanes for the ``planner`` and ``sublane`` drivers. The planner's
+#: runs need the sublane model: the ego leans into a neighbouring lane to pass an obstacle,
+#: and only with sublanes do SUMO's vehicles on that lane see the part of the ego that is in
+#: it (lane-based, SUMO puts the ego on one lane and a car on the next lane drives past it
+#: with centimetres to spare; see the module's docs).
+LATERAL_RESOLUTION = 0.4
 
 
 @dataclass(frozen=True)
@@ -193,8 +202,12 @@ def simulate(
     on_step
         Called with the simulation time [s] after every step (a hook for tests and tools).
     driver
-        ``"planner"``, or ``"sumo"`` to let SUMO's own driver model drive the ego along the
-        same level-1 route (the benchmark's baseline).
+        ``"planner"`` (splineplan drives), ``"sumo"`` (SUMO's default lane-based driver
+        model drives the ego along the same level-1 route; SUMO runs without sublanes) or
+        ``"sublane"`` (SUMO's sublane model drives it; ``--lateral-resolution``
+        :data:`LATERAL_RESOLUTION`, as for the planner). Nothing is teleported
+        (``--time-to-teleport -1``): a SUMO driver stuck behind a blockage stands until the
+        duration ends, and the run's status is ``timeout``, saying so.
 
     Raises
     ------
@@ -205,8 +218,9 @@ def simulate(
     """
     if seed is not None:
         scenario = scenario.with_seed(seed)
-    if driver not in ("planner", "sumo"):
-        raise ParameterError(f"driver must be 'planner' or 'sumo', not {driver!r}")
+    if driver not in DRIVERS:
+        raise ParameterError(f"driver must be one of {', '.join(map(repr, DRIVERS))}, "
+                             f"not {driver!r}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     run = _Run(scenario, out, driver=driver, gui=gui, on_step=on_step,
@@ -313,6 +327,11 @@ class _Run:
         self.retry_at: float | None = None
         self.goal_station = math.nan
         self.last_lane = ""
+        self.teleports = 0  # of any vehicle
+        self.ego_teleports: list[float] = []
+        self.check_seconds = 0.0  # wall time [s] of the loop's own safety checks
+        self.c: Any = None  # libsumo.constants
+        self._obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]] = {}
 
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> None:
@@ -355,6 +374,7 @@ class _Run:
         ego = self.sc.ego
         self.corridor = corridor
         self.route_edges = tuple(edges)
+        self._obs_cache = {}
         i = len(edges) - 1
         goal_len = self.net.length_of(ego.goal_edge)
         goal_pos = ego.goal_pos if ego.goal_pos is not None else max(
@@ -384,7 +404,7 @@ class _Run:
         cmd = [binary, "-n", str(sc.network),
                "--step-length", f"{self.dt:g}", "--seed", str(sc.sim.seed),
                "--collision.action", "warn", "--collision.check-junctions", "true",
-               "--time-to-teleport", "-1", "--lateral-resolution", "0.4",
+               "--time-to-teleport", "-1", *self._lateral_options(),
                "--fcd-output", str(self.out / "fcd.xml"),
                "--log", str(self.out / "sumo.log"),
                "--no-step-log", "true", "--duration-log.disable", "true"]
@@ -406,6 +426,11 @@ class _Run:
         self.sumo_started = True
         self.polygons = self._read_polygons()
         self.road.add_junctions(self._junction_shapes())
+
+    def _lateral_options(self) -> list[str]:
+        if self.driver == "sumo":
+            return []
+        return ["--lateral-resolution", f"{LATERAL_RESOLUTION:g}"]
 
     def _junction_shapes(self) -> list[FloatArray]:
         s = self.sumo
@@ -440,44 +465,71 @@ class _Run:
         s.vehicletype.setColor(vtype, (255, 0, 0, 255))
         rid = f"{ego.id}_route"
         s.route.add(rid, list(self.route_edges))
+        extra = {}
+        if self.driver != "planner":  # SUMO's drivers end their trip at the goal
+            goal_len = self.net.length_of(ego.goal_edge)
+            goal = ego.goal_pos if ego.goal_pos is not None else max(
+                goal_len - self.sc.sim.goal_margin, 0.0)
+            extra["arrivalPos"] = f"{goal:g}"
         s.vehicle.add(ego.id, rid, typeID=vtype, depart=f"{ego.depart:g}",
                       departPos=f"{ego.start_pos:g}", departLane=str(ego.start_lane),
-                      departSpeed="0")
+                      departSpeed="0", **extra)
 
     # -- main loop --------------------------------------------------------------------------
     def loop(self) -> None:
         sc = self.sc
         bar = _progress_bar(sc.sim.duration, sc.name) if self.progress else None
         steps = round(sc.sim.duration / self.dt)
+        planner = self.driver == "planner"
         try:
             for k in range(steps):
-                if self.in_sim and self.driver == "planner":
+                if self.in_sim and planner:
                     self._drive()
                 self._step()
                 if self.on_step is not None:
                     self.on_step(self.time)
+                if bar is not None and k % 10 == 0:
+                    bar.update(10 * self.dt)
                 if not self.in_sim:
-                    if (self.depart_time is None
-                            and self.ego in self.sumo.simulation.getDepartedIDList()):
-                        self._enter()
-                    continue
-                if self.driver == "sumo":
-                    if self._observe_sumo_driver():
-                        break
-                    continue
+                    if (self.depart_time is not None
+                            or self.ego not in self.sumo.simulation.getDepartedIDList()):
+                        continue
+                    self._enter()
+                elif not planner and self.ego in self.sumo.simulation.getArrivedIDList():
+                    self.status = "arrived"
+                    self.reason = (f"SUMO's driver reached the end of its route at "
+                                   f"t={self.time:.1f} s")
+                    self.in_sim = False
+                    break
                 self._observe()
                 if self.status != "running":
                     break
-                self._maybe_replan()
-                if bar is not None and k % 10 == 0:
-                    bar.update(10 * self.dt)
+                if planner:
+                    if not self.replans:
+                        self._replan("start", "")
+                    else:
+                        self._maybe_replan()
             else:
                 self.status = "timeout"
-                self.reason = (f"duration {sc.sim.duration:g} s reached before the ego arrived"
-                               + (f" ({self.reason})" if self.reason else ""))
+                self.reason = self._timeout_reason()
         finally:
             if bar is not None:
                 bar.close()
+
+    def _timeout_reason(self) -> str:
+        text = f"duration {self.sc.sim.duration:g} s reached before the ego arrived"
+        if self.depart_time is None:
+            return text + " (the ego was never inserted)"
+        # how long the ego has been standing: SUMO's drivers wait behind a blockage forever
+        # (--time-to-teleport -1)
+        moving = [r[0] for r in self.rows if r[4] > 0.1]
+        since = moving[-1] if moving else self.depart_time
+        if self.time - since >= 5.0:
+            text += (f" (standing still for the last {self.time - since:.0f} s on lane "
+                     f"'{self.last_lane}')")
+        if self.reason:
+            text += f" ({self.reason})"
+        return text
 
     def _step(self) -> None:
         s = self.sumo
@@ -495,107 +547,125 @@ class _Run:
             rec = {"time": self.time, "collider": c.collider, "victim": c.victim,
                    "type": c.type, "lane": c.lane, "pos": c.pos}
             self.sumo_collisions.append(rec)
+        tele = s.simulation.getStartingTeleportIDList()
+        if tele:
+            self.teleports += len(tele)
+            if self.ego in tele:
+                self.ego_teleports.append(self.time)
 
     def _enter(self) -> None:
-        """The ego has just been inserted: take over."""
+        """The ego has just been inserted: subscribe to it and to the vehicles around it."""
         s, ego = self.sumo, self.sc.ego
         self.in_sim = True
         self.depart_time = self.time
-        if self.driver == "sumo":
-            return
         c = s.constants
+        self.c = c
+        s.vehicle.subscribe(self.ego, [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED,
+                                       c.VAR_LANE_ID])
         rng = self.sc.sim.lookahead + ego.length + 20.0
         s.vehicle.subscribeContext(self.ego, c.CMD_GET_VEHICLE_VARIABLE, rng,
                                    [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_LENGTH,
                                     c.VAR_WIDTH, c.VAR_STOPSTATE])
+        if self.driver != "planner":
+            return
         s.vehicle.setSpeedMode(self.ego, 0)
         s.vehicle.setLaneChangeMode(self.ego, 0)
-        front = np.asarray(s.vehicle.getPosition(self.ego), dtype=float)
-        heading = float(heading_from_sumo_angle(s.vehicle.getAngle(self.ego)))
-        centre = front - ego.length / 2.0 * np.array([math.cos(heading), math.sin(heading)])
-        self.pose = np.array([centre[0], centre[1], heading])
+        self._set_pose_from_sumo()
         self.v = 0.0
-        self._observe()
-        self._replan("start", "")
 
     # -- observation --------------------------------------------------------------------------
-    def _others(self) -> dict[str, Any]:
-        s = self.sumo
-        res = s.vehicle.getContextSubscriptionResults(self.ego) or {}
-        res.pop(self.ego, None)
-        return res
+    def _read_others(self) -> None:
+        """The vehicles around the ego, from the context subscription (one call)."""
+        c = self.c
+        res = self.sumo.vehicle.getContextSubscriptionResults(self.ego)
+        ids, vals = [], []
+        for vid, v in (res or {}).items():
+            if vid == self.ego:
+                continue
+            p = v[c.VAR_POSITION]
+            ids.append(vid)
+            vals.append((p[0], p[1], v[c.VAR_ANGLE], v[c.VAR_LENGTH], v[c.VAR_WIDTH],
+                         v[c.VAR_SPEED], v[c.VAR_STOPSTATE]))
+        if not ids:
+            self.others = _NO_OTHERS
+            return
+        a = np.array(vals, dtype=float)
+        speeds = a[:, 5]
+        stopped = ((a[:, 6].astype(np.int64) & 3) > 0) & (speeds < self.sc.sim.stopped_speed)
+        self.others = (ids, a[:, :2], np.radians(90.0 - a[:, 2]), a[:, 3], a[:, 4], speeds,
+                       stopped)
 
     def _observe(self) -> None:
         """Read the world after a step; check where SUMO put the ego; safety checks."""
-        s, ego, sim = self.sumo, self.sc.ego, self.sc.sim
-        c = s.constants
-        try:
-            sumo_front = np.asarray(s.vehicle.getPosition(self.ego), dtype=float)
-            lane = s.vehicle.getLaneID(self.ego)
-        except Exception as err:
+        s, ego = self.sumo, self.sc.ego
+        c = self.c
+        st = s.vehicle.getSubscriptionResults(self.ego)
+        if not st or self.ego not in s.vehicle.getIDList():
             raise SimulationError(f"ego vehicle '{self.ego}' left the simulation at "
-                                  f"t={self.time:.1f} s (removed by someone else)") from err
-        x, y, h = self.pose
-        want_front = np.array([x, y]) + ego.length / 2.0 * np.array([math.cos(h), math.sin(h)])
-        pos_err = float(np.hypot(*(sumo_front - want_front)))
-        self.position_errors.append(pos_err)
-        self.deviation = pos_err
+                                  f"t={self.time:.1f} s (removed by someone else)")
+        fx, fy = st[c.VAR_POSITION]
+        lane = st[c.VAR_LANE_ID]
+        half = ego.length / 2.0
+        if self.driver == "planner":
+            x, y, h = (float(v) for v in self.pose)
+            pos_err = math.hypot(fx - (x + half * math.cos(h)), fy - (y + half * math.sin(h)))
+            self.position_errors.append(pos_err)
+            self.deviation = pos_err
+        else:
+            h = math.radians(90.0 - st[c.VAR_ANGLE])
+            x, y = fx - half * math.cos(h), fy - half * math.sin(h)
+            self.pose = np.array([x, y, h])
+            self.v = float(st[c.VAR_SPEED])
+            pos_err = math.nan
         self.last_lane = lane
-        others = self._others()
-        ids = list(others)
-        if ids:
-            fronts = np.array([others[v][c.VAR_POSITION] for v in ids], dtype=float)
-            heads = heading_from_sumo_angle([others[v][c.VAR_ANGLE] for v in ids])
-            lens = np.array([others[v][c.VAR_LENGTH] for v in ids], dtype=float)
-            wids = np.array([others[v][c.VAR_WIDTH] for v in ids], dtype=float)
-            speeds = np.array([others[v][c.VAR_SPEED] for v in ids], dtype=float)
-            stop_state = np.array([others[v][c.VAR_STOPSTATE] for v in ids], dtype=int)
-        else:
-            fronts = np.zeros((0, 2))
-            heads = lens = wids = speeds = np.zeros(0)
-            stop_state = np.zeros(0, dtype=int)
-        stopped = (stop_state & 3) > 0
-        stopped &= speeds < sim.stopped_speed
-        self.others = (ids, fronts, heads, lens, wids, speeds, stopped)
-        # safety: footprint against every other vehicle and obstacle polygon, and the road
-        ego_box = footprint(self.pose[:2], h, ego.length, ego.width)
-        # bounding circles first: the exact distance only where they come within 2 m
-        r_ego = math.hypot(ego.length, ego.width) / 2.0
-        if len(ids):
-            centres = fronts - (lens / 2.0)[:, None] * np.column_stack((np.cos(heads),
-                                                                       np.sin(heads)))
-            rough = (np.hypot(*(centres - self.pose[:2]).T) - r_ego
-                     - np.hypot(lens, wids) / 2.0)
-        else:
-            rough = np.zeros(0)
-        dist = rough.copy()
-        close = np.flatnonzero(rough < 2.0)
-        if len(close):
-            dist[close] = box_distances(ego_box, footprints(
-                fronts[close], heads[close], lens[close], wids[close]))
-        clear_obs = float(dist[stopped].min()) if stopped.any() else math.inf
-        clear_veh = float(dist[~stopped].min()) if (~stopped).any() else math.inf
-        if len(self.polygons):
-            near = self.polygons.near(ego_box, sim.lookahead)
-            if len(near):
-                clear_obs = min(clear_obs, float(near.distance(ego_box).min()))
-        for j in np.flatnonzero(dist <= 0.0):
-            self.collisions.append({"time": self.time, "other": ids[j],
-                                    "other_stopped": bool(stopped[j]), "source": "footprint"})
-        assert self.corridor is not None
-        probe = np.vstack((ego_box, (ego_box + np.roll(ego_box, -1, axis=0)) / 2.0))
-        off_road = not bool(self.road.contains(probe).all())
-        sl = self._project(self.pose[:2])
+        self._read_others()
+        t0 = time.perf_counter()
+        clear_obs, clear_veh, off_road = self._safety(x, y, h)
+        self.check_seconds += time.perf_counter() - t0
+        sl = self._project(np.array([x, y]))
         self.station = float(sl[0])
         self.rows.append((self.time, x, y, h, self.v, self.station, float(sl[1]), lane,
-                          float(sumo_front[0]), float(sumo_front[1]), pos_err, clear_obs,
-                          clear_veh, int(off_road), self.limited))
+                          float(fx), float(fy), pos_err, clear_obs, clear_veh, int(off_road),
+                          self.limited))
         if self.station >= self.goal_station:
             self.status = "arrived"
             self.reason = (f"front bumper reached the goal on edge '{ego.goal_edge}' at "
                            f"t={self.time:.1f} s")
             _safe_remove(s, self.ego)
             self.in_sim = False
+
+    def _safety(self, x: float, y: float, h: float) -> tuple[float, float, bool]:
+        """Clearance [m] to stopped and to moving vehicles (and obstacle polygons), collisions
+        (recorded), and whether the ego's footprint leaves the road."""
+        ego = self.sc.ego
+        ids, fronts, heads, lens, wids, _, stopped = self.others
+        ego_box = _box(x, y, h, ego.length, ego.width)
+        clear_obs = clear_veh = math.inf
+        if ids:
+            # bounding circles first: the exact distance only where they come within 2 m
+            r_ego = math.hypot(ego.length, ego.width) / 2.0
+            cx = fronts[:, 0] - lens / 2.0 * np.cos(heads) - x
+            cy = fronts[:, 1] - lens / 2.0 * np.sin(heads) - y
+            dist = np.hypot(cx, cy) - r_ego - np.hypot(lens, wids) / 2.0
+            close = np.flatnonzero(dist < 2.0)
+            if len(close):
+                dist[close] = box_distances(ego_box, footprints(
+                    fronts[close], heads[close], lens[close], wids[close]))
+                for j in close[dist[close] <= 0.0]:
+                    self.collisions.append({"time": self.time, "other": ids[j],
+                                            "other_stopped": bool(stopped[j]),
+                                            "source": "footprint"})
+            if stopped.any():
+                clear_obs = float(dist[stopped].min())
+            if not stopped.all():
+                clear_veh = float(dist[~stopped].min())
+        if len(self.polygons):
+            near = self.polygons.near(ego_box, self.sc.sim.lookahead)
+            if len(near):
+                clear_obs = min(clear_obs, float(near.distance(ego_box).min()))
+        probe = np.vstack((ego_box, (ego_box + np.roll(ego_box, -1, axis=0)) / 2.0))
+        off_road = not bool(self.road.contains(probe).all())
+        return clear_obs, clear_veh, off_road
 
     def _project(self, xy: FloatArray) -> FloatArray:
         """Station and lateral offset ``(2,)`` of a point near the last known station.
@@ -628,58 +698,69 @@ class _Run:
     limited = 0
     deviation = 0.0
     station = 0.0
-    others: tuple[Any, ...] = ([], np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
-                               np.zeros(0), np.zeros(0, dtype=bool))
-
-    def _observe_sumo_driver(self) -> bool:
-        """Baseline: SUMO drives the ego; record its pose. True when it has arrived."""
-        s, ego = self.sumo, self.sc.ego
-        if self.ego in s.simulation.getArrivedIDList():
-            self.status = "arrived"
-            self.reason = f"SUMO's driver arrived at t={self.time:.1f} s"
-            return True
-        try:
-            front = s.vehicle.getPosition(self.ego)
-            angle = s.vehicle.getAngle(self.ego)
-            v = s.vehicle.getSpeed(self.ego)
-        except Exception as err:
-            raise SimulationError(f"ego vehicle '{self.ego}' left the simulation at "
-                                  f"t={self.time:.1f} s") from err
-        h = float(heading_from_sumo_angle(angle))
-        x = front[0] - ego.length / 2.0 * math.cos(h)
-        y = front[1] - ego.length / 2.0 * math.sin(h)
-        self.pose = np.array([x, y, h])
-        self.v = v
-        self.rows.append((self.time, x, y, h, v, math.nan, math.nan, "", front[0], front[1],
-                          0.0, math.inf, math.inf, 0, 0))
-        return False
+    others: tuple[Any, ...] = ()
 
     # -- obstacles ahead ----------------------------------------------------------------------
-    def _obstacles_ahead(self) -> Obstacles:
-        """Stopped vehicles and obstacle polygons near the route within the look-ahead."""
+    def _ahead(self) -> tuple[np.ndarray, np.ndarray]:
+        """Indices of the stopped vehicles (in ``self.others``) and of the obstacle polygons
+        near the route within the look-ahead.
+
+        Where an obstacle lies on the route is computed once per obstacle and position (a
+        stopped vehicle does not move) and route.
+        """
         ids, fronts, heads, lens, wids, _, stopped = self.others
         sim, ego = self.sc.sim, self.sc.ego
-        assert self.corridor is not None
-        obs = Obstacles.empty()
-        if stopped.any():
-            idx = np.flatnonzero(stopped)
-            obs = Obstacles.from_boxes(fronts[idx], heads[idx], lens[idx], wids[idx],
-                                       reference="front", ids=[ids[i] for i in idx])
-        if len(self.polygons):
-            obs = obs + self.polygons
-        if not len(obs):
-            return obs
         lo = self.station - ego.length - 5.0
+        assert self.corridor is not None
         hi = min(self.station + sim.lookahead, self.corridor.length) + 5.0
-        keep = []
-        for i in range(len(obs)):
-            poly = obs.polygon(i)
-            sl = self.corridor.to_sl(poly)
-            r, lft = self.corridor.bounds_at(np.clip(sl[:, 0], 0.0, self.corridor.length))
-            ahead = (sl[:, 0].max() >= lo) and (sl[:, 0].min() <= hi)
-            lateral = (sl[:, 1].max() >= r.min() - 1.0) and (sl[:, 1].min() <= lft.max() + 1.0)
-            keep.append(bool(ahead and lateral))
-        return obs.subset(np.array(keep, dtype=bool)) if any(keep) else Obstacles.empty()
+        veh = np.flatnonzero(stopped) if ids else np.zeros(0, dtype=np.int64)
+        keep_v = []
+        for i in veh:
+            key = (ids[i], round(float(fronts[i, 0]), 1), round(float(fronts[i, 1]), 1))
+            where = self._obs_cache.get(key)
+            if where is None:
+                box = footprints(fronts[i:i + 1], heads[i:i + 1], lens[i:i + 1],
+                                 wids[i:i + 1])[0]
+                where = self._on_route(box)
+                self._obs_cache[key] = where
+            if where[2] and where[1] >= lo and where[0] <= hi:
+                keep_v.append(i)
+        keep_p = []
+        for j in range(len(self.polygons)):
+            key = (f"polygon:{j}", 0.0, 0.0)
+            where = self._obs_cache.get(key)
+            if where is None:
+                where = self._on_route(self.polygons.polygon(j))
+                self._obs_cache[key] = where
+            if where[2] and where[1] >= lo and where[0] <= hi:
+                keep_p.append(j)
+        return np.asarray(keep_v, dtype=np.int64), np.asarray(keep_p, dtype=np.int64)
+
+    def _on_route(self, poly: FloatArray) -> tuple[float, float, bool]:
+        """Station range [m] of a polygon on the route, and whether it is within 1 m of the
+        drivable area laterally."""
+        assert self.corridor is not None
+        sl = self.corridor.to_sl(poly)
+        r, lft = self.corridor.bounds_at(np.clip(sl[:, 0], 0.0, self.corridor.length))
+        lateral = bool((sl[:, 1].max() >= r.min() - 1.0) and (sl[:, 1].min() <= lft.max() + 1.0))
+        return float(sl[:, 0].min()), float(sl[:, 0].max()), lateral
+
+    def _ahead_ids(self, veh: np.ndarray, poly: np.ndarray) -> set[str]:
+        ids = self.others[0]
+        return {ids[i] for i in veh} | {self.polygons.ids[j] for j in poly}
+
+    def _obstacles_ahead(self, ahead: tuple[np.ndarray, np.ndarray] | None = None
+                         ) -> Obstacles:
+        """Stopped vehicles and obstacle polygons near the route within the look-ahead."""
+        veh, poly = self._ahead() if ahead is None else ahead
+        ids, fronts, heads, lens, wids, _, _ = self.others
+        obs = Obstacles.empty()
+        if len(veh):
+            obs = Obstacles.from_boxes(fronts[veh], heads[veh], lens[veh], wids[veh],
+                                       reference="front", ids=[ids[i] for i in veh])
+        if len(poly):
+            obs = obs + self.polygons.subset(poly)
+        return obs
 
     # -- planning ----------------------------------------------------------------------------
     def _maybe_replan(self) -> None:
@@ -692,17 +773,18 @@ class _Run:
             self._set_pose_from_sumo()
             self._replan("deviation", f"SUMO placed the ego {self.deviation:.2f} m off the plan")
             return
-        ahead = self._obstacles_ahead()
-        new = set(ahead.ids) - self.planned_ids
+        ahead = self._ahead()
+        new = self._ahead_ids(*ahead) - self.planned_ids
         if new:
             self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
-                         obstacles=ahead)
+                         obstacles=self._obstacles_ahead(ahead))
             return
         assert self.corridor is not None
         left = self.path_s[-1] - self.u
         if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
                 left < sim.replan_distance):
-            self._replan("horizon", f"{left:.1f} m of the plan left", obstacles=ahead)
+            self._replan("horizon", f"{left:.1f} m of the plan left",
+                         obstacles=self._obstacles_ahead(ahead))
 
     def _set_pose_from_sumo(self) -> None:
         s, ego = self.sumo, self.sc.ego
@@ -746,6 +828,8 @@ class _Run:
 
     def _plan(self, obstacles: Obstacles) -> tuple[bool, Any]:
         """Levels 2 and 3 on the window ahead. Returns (ok, error)."""
+        from splineplan.planner import plan_corridor
+
         sc, ego = self.sc, self.sc.ego
         assert self.corridor is not None
         s0 = max(self.station - ego.length, 0.0)
@@ -757,44 +841,36 @@ class _Run:
         if s1 - s0 < 2.0 * sc.roadmap.d + ego.length:
             s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, 0.0)
         final = s1 >= self.corridor.length - 1e-6
-        blocked: RoadBlockedError | None = None
-        # The sweep lines' phase along the road decides which arcs exist; a road counts as
-        # blocked only if level 2 finds it closed at every phase tried.
-        for phase in _SWEEP_PHASES:
-            try:
-                window = self.corridor.slice(s0 + phase * sc.roadmap.d, s1)
-                roadmaps, traj = _plan_window(
-                    window, obstacles, self.pose[:2], float(self.pose[2]),
-                    roadmap_params=sc.roadmap, params=sc.trajectory,
-                    start_speed=float(self.v), end_speed=0.0 if final else None)
-            except RoadBlockedError as err:
-                if blocked is None or err.station > blocked.station:
-                    blocked = err
-                continue
-            except (TrajectoryError, GeometryError) as err:
-                return False, err
-            bad = np.flatnonzero(np.asarray(traj.clearance_obstacles)
-                                 < sc.roadmap.safety_margin - 1e-6)
-            if len(bad):
-                # drive only the part that keeps clear; stop before the rest, replan on the way
-                keep = float(traj.s[bad[0]]) - sc.roadmap.d
-                if keep < max(2.0 * sc.roadmap.d, 0.5 * float(self.v) ** 2 / (
-                        sc.trajectory.b_max)):
-                    return False, TrajectoryError(
-                        f"trajectory passes {float(np.min(traj.clearance_obstacles)):.2f} m "
-                        f"from an obstacle {float(traj.s[bad[0]]):.1f} m ahead")
-                self._take(traj, s1, usable=keep)
-                self.plans.append((self.time, roadmaps, traj, window, obstacles))
-                return True, None
-            break
-        else:
-            assert blocked is not None
+        try:
+            window = self.corridor.slice(s0, s1)
+            roadmaps, traj = plan_corridor(
+                window, obstacles, self.pose[:2], float(self.pose[2]),
+                roadmap_params=sc.roadmap, params=sc.trajectory,
+                start_speed=float(self.v), end_speed=0.0 if final else None)
+        except RoadBlockedError as err:
+            blocked = err
             if blocked.edge is None:
-                blocked = RoadBlockedError(str(blocked), station=blocked.station,
-                                           edge=self.corridor.edge_at(float(blocked.station)))
+                blocked = RoadBlockedError(str(err), station=err.station,
+                                           edge=self.corridor.edge_at(float(err.station)))
             blocked.station_on_route = float(blocked.station)  # type: ignore[attr-defined]
             return False, blocked
-        self._take(traj, s1)
+        except (TrajectoryError, GeometryError) as err:
+            return False, err
+        bad = np.flatnonzero(np.asarray(traj.clearance_obstacles)
+                             < sc.roadmap.safety_margin - 1e-6)
+        usable = None
+        if len(bad):
+            # level 3 reports a curve that comes closer than the margin: drive only the part
+            # that keeps clear, stop before the rest, and replan on the way
+            usable = float(traj.s[bad[0]]) - sc.roadmap.d
+            if usable < max(2.0 * sc.roadmap.d, 0.5 * float(self.v) ** 2 / (
+                    sc.trajectory.b_max)):
+                return False, TrajectoryError(
+                    f"trajectory passes {float(np.min(traj.clearance_obstacles)):.2f} m "
+                    f"from an obstacle {float(traj.s[bad[0]]):.1f} m ahead")
+            log.info("t=%.1f trajectory infeasible %.1f m ahead: driving %.1f m of it",
+                     self.time, float(traj.s[bad[0]]), usable)
+        self._take(traj, s1, usable=usable)
         self.plans.append((self.time, roadmaps, traj, window, obstacles))
         return True, None
 
@@ -1010,7 +1086,7 @@ class _Run:
         for i, name in enumerate(names):
             vals = [r[i] for r in self.rows]
             cols[name] = np.array(vals, dtype=object if name == "lane" else float)
-        dyn = dynamics(cols["t"], cols["heading"], cols["speed"])
+        dyn = dynamics(cols["t"], cols["x"], cols["y"], cols["speed"])
         cols.update(dyn)
         return cols
 
@@ -1057,6 +1133,11 @@ class _Run:
             "off_road_tolerance": OFF_ROAD_TOLERANCE,
             "max_speed": float(d["speed"].max()) if len(t) else None,
             "max_lateral_acceleration": float(np.abs(d["a_lat"]).max()) if len(t) else None,
+            "max_curvature": float(np.abs(d["curvature"]).max()) if len(t) else None,
+            "lateral_acceleration_method": (
+                "v^2 * kappa; kappa of the driven centre positions by the second difference "
+                f"|P(s+h) + P(s-h) - 2 P(s)| / h^2 over arc length, h = max({CURVATURE_SPAN:g} "
+                "m, twice the largest sample spacing)"),
             "max_longitudinal_acceleration": float(np.abs(d["a_lon"]).max()) if len(t) else None,
             "max_jerk": float(d["jerk"].max()) if len(t) else None,
             "replans": [r.__dict__ for r in self.replans],
@@ -1064,7 +1145,12 @@ class _Run:
             "planning_time": summary_stats(plan_times),
             "position_error_max": (float(max(self.position_errors))
                                    if self.position_errors else None),
+            # --time-to-teleport -1: SUMO teleports nobody, so these stay 0 unless the
+            # option is changed; a stuck SUMO driver shows as status "timeout" instead
+            "teleports": self.teleports,
+            "ego_teleports": len(self.ego_teleports),
             "wall_time": self.wall_time,
+            "safety_check_time": self.check_seconds,
         }
 
 
@@ -1136,6 +1222,21 @@ class _RoadCheck:
         return np.asarray(on)
 
 
+_NO_OTHERS: tuple[Any, ...] = ([], np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
+                               np.zeros(0), np.zeros(0, dtype=bool))
+
+
+def _box(x: float, y: float, h: float, length: float, width: float) -> FloatArray:
+    """Corners ``(4, 2)`` [m] of a rectangle from its centre and heading [rad] (rear right
+    first, counter-clockwise), as :func:`splineplan.metrics.footprint`."""
+    c, s = math.cos(h), math.sin(h)
+    hl, hw = length / 2.0, width / 2.0
+    return np.array([[x - hl * c + hw * s, y - hl * s - hw * c],
+                     [x + hl * c + hw * s, y + hl * s - hw * c],
+                     [x + hl * c - hw * s, y + hl * s + hw * c],
+                     [x - hl * c - hw * s, y - hl * s + hw * c]])
+
+
 @dataclass(frozen=True)
 class _Cut:
     """The drivable start of a trajectory whose end came too near an obstacle."""
@@ -1145,26 +1246,6 @@ class _Cut:
     y: FloatArray
     heading: FloatArray
     speed: FloatArray
-
-
-def _plan_window(window: Corridor, obstacles: Obstacles, start_xy: FloatArray,
-                 start_heading: float, *, roadmap_params: Any, params: Any,
-                 start_speed: float, end_speed: float | None) -> tuple[list[Any], Any]:
-    """Levels 2 and 3 on one planning window (one road segment unless it is longer)."""
-    if window.length > roadmap_params.segment_length:
-        from splineplan.planner import plan_corridor
-
-        roadmaps, traj = plan_corridor(window, obstacles, start_xy, start_heading,
-                                       roadmap_params=roadmap_params, params=params,
-                                       start_speed=start_speed, end_speed=end_speed)
-        return list(roadmaps), traj
-    from splineplan.roadmap import plan_roadmap
-    from splineplan.trajectory import plan_trajectory
-
-    roadmap = plan_roadmap(window, obstacles, start_xy, roadmap_params)
-    traj = plan_trajectory(roadmap, window, obstacles, params, start_heading,
-                           start_speed=start_speed, end_speed=end_speed)
-    return [roadmap], traj
 
 
 def _jsonable(value: Any) -> Any:

@@ -66,14 +66,14 @@ def speed_profile(
     v2[0] = min(v2[0], start_speed**2)
     if end_speed is not None:
         v2[-1] = min(v2[-1], end_speed**2)
-    # The passes are a recurrence; a Python loop over a few thousand floats is fast enough.
-    out = v2.tolist()
-    acc = (2.0 * a_max * ds).tolist()
-    brk = (2.0 * b_max * ds).tolist()
-    for j in range(1, len(out)):
-        out[j] = min(out[j], out[j - 1] + acc[j - 1])
-    for j in range(len(out) - 2, -1, -1):
-        out[j] = min(out[j], out[j + 1] + brk[j])
+    # The passes are min-plus recurrences, v_j^2 = min(lim_j^2, v_{j-1}^2 + 2 a ds): in
+    # closed form v_j^2 = C_j + min_{i <= j} (lim_i^2 - C_i) with C the cumulated 2 a ds
+    # (and backwards likewise), so both run as cumulative sums and running minima.
+    acc = np.concatenate(([0.0], np.cumsum(2.0 * a_max * ds)))
+    fwd = acc + np.minimum.accumulate(v2 - acc)
+    brk = np.concatenate(([0.0], np.cumsum(2.0 * b_max * ds)))
+    out = np.minimum.accumulate((fwd + brk)[::-1])[::-1] - brk
+    out = np.clip(np.minimum(out, v2), 0.0, None)
     v = np.sqrt(np.asarray(out))
     if v[0] < start_speed - 1e-9:
         log.warning("start speed %.2f m/s exceeds what the curve allows (%.2f m/s)",

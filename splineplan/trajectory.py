@@ -1,34 +1,49 @@
 """Level 3: a B-spline through the roadmap, smoothed for speed, with a speed profile.
 
 (Kala & Warwick, section IV, read as in ALGORITHM.md.) The control points of a clamped
-B-spline are the roadmap's vertices, plus one just ahead of the start along the vehicle's
-heading. While some point of the curve allows less than ``s_max`` (equation 1), the control
-point nearest the slowest point moves to its neighbours' mean (equation 3); a move is kept only
-if the vehicle's footprint along the changed part of the curve stays on the road and clear of
-the obstacles by the safety margin, and the curvature stays within the turning limit.
+B-spline are roadmap vertices, after the vehicle's position and a heading point just ahead of
+it along its heading. While some point of the curve allows less than ``s_max`` (equation 1),
+the control point nearest the slowest point moves to its neighbours' mean (equation 3); a
+move is kept only if the vehicle's footprint along the changed part of the curve stays on
+the road and clear of the obstacles by the safety margin, and the curvature stays within
+the turning limit.
 
-Design choices, beyond the paper:
+Steps, and the choices beyond the paper:
 
-- "Nearest" control point: nearest in parameter, by Greville abscissa, among the ``degree + 1``
-  control points that shape the curve at that point (the one with the most influence there,
-  monotone along the curve); if it may not move, the next nearest of those.
-- Moves whose supports do not overlap (indices ``degree + 1`` or more apart) commute, so each
-  round makes the move of the slowest point and, beside it, the moves of the slowest points of
-  the other independent stretches; the acceptance test of each is the one it would get alone.
-- Feasibility is checked at fixed parameter samples, only where a move changes the curve
-  (``degree + 1`` knot spans). The footprint is the vehicle's rectangle centred on the curve
-  and oriented along it; its distance to each nearby obstacle polygon is computed exactly
-  (culled by bounding box); on the road its corners and long-side midpoints keep the margin
-  from the road edges (the corridor is extended past its ends along its end segments).
-- A curve that starts infeasible (the level-2 disc model is smaller than the rectangle, and the
-  spline cuts the roadmap's corners) is not refused outright: a move is then kept if no sample
-  that was feasible becomes infeasible and the worst violation of the changed part does not
-  grow. When the start is feasible this is exactly "the new curve is feasible". The result
-  reports the final clearance and a ``feasible`` flag honestly.
-- Single moves to the neighbours' mean can sharpen a bend for a while (beside a point whose
-  move was refused, or on a smooth bend before its neighbours follow), so the curve returned
-  is the one with the highest minimum allowed speed seen after any round (at worst the
-  initial curve): the minimum allowed speed never decreases.
+1. Band simplification picks the control points. Each chosen roadmap vertex ``k`` stands
+   on its sweep line at the midpoint ``l_k`` of its free interval ``[lo_k, hi_k]``; its band
+   is ``l_k +- rho (hi_k - lo_k) / 2`` (``band_fraction`` rho). Greedy string pulling keeps,
+   from the last kept vertex, the farthest vertex such that the straight segments to it
+   cross every skipped sweep line inside its band (:func:`band_simplify`): the control
+   polygon keeps at least ``1 - rho`` of each interval's separation, so the paper's
+   separation is only partly traded for fewer, straighter legs. rho = 0 only drops
+   collinear vertices. Legs longer than ``max_control_spacing`` get extra control points on
+   them, so that equation (3) has points to move on long straights.
+2. Lead-in: the first roadmap vertex used is the farthest that the vehicle's position
+   reaches within the bands (within ``max_control_spacing``), and at least the lead-in
+   distance ahead.
+3. Repair: a clamped B-spline cuts its polygon's corners (by about
+   ``|P_{i-1} - 2 P_i + P_{i+1}| / 6`` for a cubic). Where the first curve's footprint is not
+   clear, the left-out roadmap vertex nearest the violation comes back; where none is left,
+   the control point nearest it is doubled (repeated control points pull the curve onto
+   the polygon); a few rounds, and the least violating curve is kept.
+4. Equation (3). "Nearest" control point: nearest in parameter, by Greville abscissa, among
+   the ``degree + 1`` control points that shape the curve at that point; if it may not
+   move, the next nearest of those. Moves whose supports do not overlap commute, so each
+   round makes the move of the slowest point and the moves of the slowest points of other
+   independent stretches. A move changes the samples linearly (cached basis: new = old +
+   basis column * delta), so only the changed stretch is re-evaluated and re-checked.
+5. Feasibility: the footprint is the vehicle's rectangle centred on the curve and oriented
+   along it; its distance to each nearby obstacle polygon is exact (culled by bounding
+   box); on the road its corners and long-side midpoints keep the margin from the road
+   edges (the corridor is extended past its ends). Curvature above ``1 / min_turn_radius``
+   is infeasible. A curve that starts infeasible is not refused outright: a move is then
+   kept if no feasible sample becomes infeasible and the worst violation of the changed
+   part does not grow (exactly "the new curve is feasible" when the start is feasible).
+   The result reports ``feasible`` honestly.
+6. Single moves can sharpen a bend for a while, so the curve returned is the one with the
+   highest minimum allowed speed seen after any round: it never decreases.
+7. Speed profile (:mod:`splineplan.speed`) along the final curve, sampled evenly in arc length.
 """
 
 from __future__ import annotations
@@ -44,7 +59,6 @@ from splineplan.corridor import Corridor
 from splineplan.errors import ParameterError, TrajectoryError
 from splineplan.geometry import (
     FloatArray,
-    dedupe_polyline,
     polyline_stations,
     wrap_angle,
 )
@@ -106,7 +120,7 @@ class TrajectoryParams:
     sample_spacing: float = 0.5
     min_turn_radius: float = 5.0
     max_iterations: int = 5000
-    band_fraction: float = 0.5
+    band_fraction: float = 0.8
     max_control_spacing: float = 25.0
     repair_rounds: int = 6
     lead_in_lengths: float = 2.0
@@ -297,7 +311,13 @@ def curvature_discrete(points: ArrayLike, h: float) -> FloatArray:
 # ---- footprint -------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class _Checker:
-    """Footprint clearance of the vehicle at curve samples, vectorised."""
+    """Footprint clearance of the vehicle at curve samples, vectorised.
+
+    The road check works in the frames of the reference line's segments (cached once:
+    origins, stations, unit directions, boundary offsets); it needs an estimate of each
+    centre's station, which the optimiser keeps per sample, so that no nearest-neighbour
+    search runs per move.
+    """
 
     corridor: Corridor
     half_length: float
@@ -305,12 +325,21 @@ class _Checker:
     margin: float
     polys: FloatArray  # (K, V, 2), padded with each ring's last vertex
     bbox: FloatArray  # (K, 4)
-    road_points: FloatArray = field(init=False)  # (q, 2) footprint points in the body frame
+    body: FloatArray = field(init=False)  # (2, q) body-frame points: footprint, then centre
+    frames: tuple[FloatArray, ...] = field(init=False)
 
     def __post_init__(self) -> None:
         hl, hw = self.half_length, self.half_width
-        pts = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw], [0.0, -hw], [0.0, hw]])
-        object.__setattr__(self, "road_points", pts)
+        pts = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw], [0.0, -hw], [0.0, hw],
+                        [0.0, 0.0]])
+        object.__setattr__(self, "body", np.ascontiguousarray(pts.T))
+        cor = self.corridor
+        st = np.asarray(cor.s, dtype=float)
+        h = cor.heading_at(st[:-1])
+        ref = np.asarray(cor.reference, dtype=float)
+        object.__setattr__(self, "frames", (
+            st, ref[:-1, 0].copy(), ref[:-1, 1].copy(), np.cos(h), np.sin(h),
+            np.asarray(cor.left, dtype=float), np.asarray(cor.right, dtype=float)))
 
     @classmethod
     def build(cls, corridor: Corridor, obstacles: Obstacles, params: RoadmapParams,
@@ -327,40 +356,51 @@ class _Checker:
         return cls(corridor, params.vehicle_length / 2.0, params.vehicle_width / 2.0,
                    params.safety_margin, polys, obs.bbox.copy() if k else np.zeros((0, 4)))
 
-    def road(self, xy: FloatArray, heading: FloatArray) -> FloatArray:
-        """Distance [m] of the footprint to the nearer road edge (negative: off the road).
+    def stations(self, xy: FloatArray) -> FloatArray:
+        """Stations [m] of points ``(n, 2)`` on the reference line (exact projection)."""
+        return np.asarray(self.corridor.to_sl(xy)[:, 0])
 
-        The centres are projected onto the reference line; each footprint point then in
-        the frame of the reference segment at its own estimated station (the reference is
+    def road(self, xy: FloatArray, heading: FloatArray, sc: FloatArray | None = None
+             ) -> tuple[FloatArray, FloatArray]:
+        """Distance [m] of the footprint to the nearer road edge (negative: off the road),
+        and the centres' stations [m].
+
+        ``sc`` estimates the centres' stations (``None``: projected exactly). All footprint
+        points are projected onto the line of the reference segment at that estimate, then
+        measured in the frame of the segment at their own station (the reference is
         resampled finely, so one segment's frame is exact enough; past the ends, the end
         segments extend the road).
         """
-        cor = self.corridor
-        sc = cor.to_sl(xy)[:, 0]
-        ref, st = cor.reference, cor.s
-        nseg = len(st) - 1
-        ic = np.clip(np.searchsorted(st, sc, side="right") - 1, 0, nseg - 1)
-        hseg = cor.heading_at(st[:-1])  # heading of each reference segment
-        tc = hseg[ic]
-        c, s = np.cos(heading), np.sin(heading)
-        bx, by = self.road_points[:, 0], self.road_points[:, 1]
-        px = xy[:, None, 0] + c[:, None] * bx - s[:, None] * by
-        py = xy[:, None, 1] + s[:, None] * bx + c[:, None] * by
-        # stations estimated along the centre's segment, then the segment there
-        est = sc[:, None] + ((px - xy[:, None, 0]) * np.cos(tc)[:, None]
-                             + (py - xy[:, None, 1]) * np.sin(tc)[:, None])
-        i = np.clip(np.searchsorted(st, est, side="right") - 1, 0, nseg - 1)
-        h = hseg[i]
-        dx, dy = px - ref[i, 0], py - ref[i, 1]
-        along = st[i] + dx * np.cos(h) + dy * np.sin(h)
-        lat = -dx * np.sin(h) + dy * np.cos(h)
-        r, lft = np.interp(along, st, cor.right), np.interp(along, st, cor.left)
-        return np.asarray(np.minimum(lft - lat, lat - r).min(axis=1))
+        st, rx, ry, hc, hs, left, right = self.frames
+        if sc is None:
+            sc = self.stations(xy)
+        nseg = len(st) - 2
+        bx, by = self.body
+        c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
+        px = (xy[:, 0, None] + c * bx) - s * by
+        py = (xy[:, 1, None] + s * bx) + c * by
+        i0 = np.searchsorted(st, sc, side="right") - 1
+        np.clip(i0, 0, nseg, out=i0)
+        est = st[i0, None] + ((px - rx[i0, None]) * hc[i0, None]
+                              + (py - ry[i0, None]) * hs[i0, None])
+        i = np.searchsorted(st, est, side="right") - 1
+        np.clip(i, 0, nseg, out=i)
+        dx, dy = px - rx[i], py - ry[i]
+        ci, si = hc[i], hs[i]
+        along = st[i] + dx * ci + dy * si
+        lat = dy * ci - dx * si
+        f = along[:, :-1]
+        clear = np.minimum(np.interp(f, st, left) - lat[:, :-1],
+                           lat[:, :-1] - np.interp(f, st, right)).min(axis=1)
+        return clear, along[:, -1]
 
-    def slack(self, xy: FloatArray, heading: FloatArray) -> FloatArray:
-        """Footprint clearance [m] beyond the safety margin (negative: too close)."""
+    def slack(self, xy: FloatArray, heading: FloatArray, sc: FloatArray | None = None
+              ) -> tuple[FloatArray, FloatArray]:
+        """Footprint clearance [m] beyond the safety margin (negative: too close), and the
+        centres' stations [m] (see :meth:`road`)."""
+        road, sc_new = self.road(xy, heading, sc)
         near = self.obstacles(xy, heading, horizon=0.01)
-        return np.asarray(np.minimum(near, self.road(xy, heading)) - self.margin)
+        return np.minimum(near, road) - self.margin, sc_new
 
     def obstacles(self, xy: FloatArray, heading: FloatArray,
                   horizon: float = CLEARANCE_HORIZON) -> FloatArray:
@@ -371,8 +411,8 @@ class _Checker:
             return out
         r = np.hypot(self.half_length, self.half_width) + self.margin + horizon
         b = self.bbox
-        hit = ((b[None, :, 0] <= xy[:, None, 0] + r) & (b[None, :, 2] >= xy[:, None, 0] - r)
-               & (b[None, :, 1] <= xy[:, None, 1] + r) & (b[None, :, 3] >= xy[:, None, 1] - r))
+        x, y = xy[:, 0, None], xy[:, 1, None]
+        hit = (b[:, 0] <= x + r) & (b[:, 2] >= x - r) & (b[:, 1] <= y + r) & (b[:, 3] >= y - r)
         js, os = np.nonzero(hit)
         if len(js) == 0:
             return out
@@ -382,6 +422,9 @@ class _Checker:
         return out
 
 
+_CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+
+
 def _rect_polygon_distance(centers: FloatArray, headings: FloatArray, hl: float, hw: float,
                            polys: FloatArray) -> FloatArray:
     """Distance [m] between oriented rectangles and polygons ``(p, V, 2)``, 0 on overlap."""
@@ -389,36 +432,38 @@ def _rect_polygon_distance(centers: FloatArray, headings: FloatArray, hl: float,
     rx = polys[..., 0] - centers[:, None, 0]
     ry = polys[..., 1] - centers[:, None, 1]
     u = rx * c + ry * s  # body frame: u along the heading, v to the left
-    v = -rx * s + ry * c
+    v = ry * c - rx * s
+    au, av = np.abs(u), np.abs(v)
     # polygon vertices to the filled rectangle
-    dv = np.hypot(np.maximum(np.abs(u) - hl, 0.0), np.maximum(np.abs(v) - hw, 0.0)).min(axis=1)
+    dv = np.hypot(np.maximum(au - hl, 0.0), np.maximum(av - hw, 0.0)).min(axis=1)
     ub, vb = np.roll(u, -1, axis=1), np.roll(v, -1, axis=1)
     du, dvv = ub - u, vb - v
-    # rectangle corners to polygon edges
+    # rectangle corners ``(4,)`` to polygon edges: arrays (p, 4, V)
     seg2 = du * du + dvv * dvv
-    best = np.full(len(u), np.inf)
-    for cu, cv in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw)):
-        t = np.clip(((cu - u) * du + (cv - v) * dvv) / np.where(seg2 > 0, seg2, 1.0), 0.0, 1.0)
-        best = np.minimum(best, np.hypot(u + t * du - cu, v + t * dvv - cv).min(axis=1))
+    inv = 1.0 / np.where(seg2 > 0, seg2, 1.0)
+    cu, cv = hl * _CORNERS[:, 0, None], hw * _CORNERS[:, 1, None]
+    wu, wv = cu - u[:, None, :], cv - v[:, None, :]
+    t = ((wu * du[:, None, :] + wv * dvv[:, None, :]) * inv[:, None, :]).clip(0.0, 1.0)
+    best = np.hypot(t * du[:, None, :] - wu, t * dvv[:, None, :] - wv).min(axis=(1, 2))
     # polygon edges crossing the rectangle (Liang-Barsky clipping)
     t_in = np.zeros_like(u)
     t_out = np.ones_like(u)
     ok = np.ones(u.shape, dtype=bool)
-    for a, d, h in ((u, du, hl), (v, dvv, hw)):
+    for a, aa, d, h in ((u, au, du, hl), (v, av, dvv, hw)):
         flat = np.abs(d) < 1e-15
-        ok &= ~flat | (np.abs(a) <= h)
+        ok &= ~flat | (aa <= h)
         with np.errstate(divide="ignore", invalid="ignore"):
             t1 = (-h - a) / d
             t2 = (h - a) / d
         lo = np.where(flat, -np.inf, np.minimum(t1, t2))
         hi = np.where(flat, np.inf, np.maximum(t1, t2))
-        t_in = np.maximum(t_in, lo)
-        t_out = np.minimum(t_out, hi)
+        np.maximum(t_in, lo, out=t_in)
+        np.minimum(t_out, hi, out=t_out)
     crosses = (ok & (t_in <= t_out)).any(axis=1)
     # rectangle inside the polygon: its centre (the origin) by crossing number
     straddle = (v > 0) != (vb > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ucross = u + (0.0 - v) * du / (vb - v)
+        ucross = u - v * du / (vb - v)
     inside = (straddle & (ucross > 0)).sum(axis=1) % 2 == 1
     return np.asarray(np.where(crosses | inside, 0.0, np.minimum(dv, best)))
 
@@ -434,38 +479,55 @@ def _basis(u: FloatArray, t: FloatArray, k: int, n: int) -> tuple[NDArray[np.int
 
     Row ``j`` holds the values at ``u[j]`` of the basis functions of control points
     ``first[j] .. first[j] + k`` (the only ones that are not zero there) and their first and
-    second derivatives with respect to the parameter.
+    second derivatives with respect to the parameter (Cox-de Boor recursion, vectorised over
+    the samples; at ``u = 1`` the left limits).
     """
     span = np.clip(np.searchsorted(t, u, side="right") - 1, k, n - 1)
     first = span - k
-    rows = np.arange(len(u))[:, None]
-    cols = first[:, None] + np.arange(k + 1)[None, :]
-    vals = np.zeros((3, len(u), k + 1))
-    for nu in range(3):
-        if nu <= k:
-            vals[nu] = _basis_matrix(u, t, k, nu)[rows, cols]
+    m = len(u)
+    tables = [np.ones((m, 1))]
+    for p in range(1, k + 1):
+        i = span[:, None] + np.arange(-p, 1)[None, :]  # (m, p + 1) function indices
+        ext = _pad(tables[-1])
+        left = _ratio(u[:, None] - t[i], t[i + p] - t[i])
+        right = _ratio(t[i + p + 1] - u[:, None], t[i + p + 1] - t[i + 1])
+        tables.append(left * ext[:, :-1] + right * ext[:, 1:])
+    vals = np.zeros((3, m, k + 1))
+    vals[0] = tables[k]
+    vals[1] = _derive(tables[k - 1], span, t, k)
+    if k >= 2:
+        vals[2] = _derive(_derive(tables[k - 2], span, t, k - 1), span, t, k)
     return first.astype(np.int64), vals
 
 
-def _basis_matrix(u: FloatArray, t: FloatArray, k: int, nu: int) -> FloatArray:
-    """Dense ``(m, len(t) - k - 1)`` matrix of the ``nu``-th derivatives of the degree-``k``
-    basis functions on knots ``t`` at ``u``: ``N'_{i,k} = k (N_{i,k-1} / (t_{i+k} - t_i)
-    - N_{i+1,k-1} / (t_{i+k+1} - t_{i+1}))``."""
-    if nu == 0:
-        return np.asarray(BSpline.design_matrix(u, t, k).toarray())
-    # Evaluate the lower degree just left of the end, where its last function is degenerate.
-    low = _basis_matrix(np.minimum(u, np.nextafter(t[-1], t[0])), t, k - 1, nu - 1)
-    nf = len(t) - k - 1
-    i = np.arange(nf)
-    den1 = t[i + k] - t[i]
-    den2 = t[i + k + 1] - t[i + 1]
-    a = np.divide(k, den1, out=np.zeros(nf), where=den1 > 0)
-    b = np.divide(k, den2, out=np.zeros(nf), where=den2 > 0)
-    return np.asarray(low[:, :nf] * a - low[:, 1:nf + 1] * b)
+def _pad(b: FloatArray) -> FloatArray:
+    """A zero column on each side of ``(m, p)``."""
+    out = np.zeros((len(b), b.shape[1] + 2))
+    out[:, 1:-1] = b
+    return out
+
+
+def _ratio(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a / b`` where ``b > 0``, else 0."""
+    return np.divide(a, b, out=np.zeros(np.broadcast(a, b).shape), where=b > 0)
+
+
+def _derive(b: FloatArray, span: NDArray[np.int64], t: FloatArray, p: int) -> FloatArray:
+    """Parameter derivatives ``(m, p + 1)`` of the degree-``p`` basis functions
+    ``span - p .. span`` from the degree ``p - 1`` ones ``b`` ``(m, p)``:
+    ``N'_{i,p} = p (N_{i,p-1} / (t_{i+p} - t_i) - N_{i+1,p-1} / (t_{i+p+1} - t_{i+1}))``."""
+    i = span[:, None] + np.arange(-p, 1)[None, :]
+    ext = _pad(b)
+    return p * (_ratio(ext[:, :-1], t[i + p] - t[i])
+                - _ratio(ext[:, 1:], t[i + p + 1] - t[i + 1]))
 
 
 def _greville(t: FloatArray, k: int, n: int) -> FloatArray:
-    return np.array([t[i + 1:i + k + 1].mean() if k > 0 else t[i] for i in range(n)])
+    if k == 0:
+        return np.asarray(t[:n], dtype=float)
+    cs = np.concatenate(([0.0], np.cumsum(t)))
+    i = np.arange(n)
+    return np.asarray((cs[i + k + 1] - cs[i + 1]) / k)
 
 
 # ---- planning --------------------------------------------------------------------------
@@ -510,8 +572,8 @@ def plan_trajectory(
         raise TrajectoryError(f"start speed must be >= 0, got {start_speed!r}")
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed)
     checker = _Checker.build(corridor, obstacles, rp, pool)
-    curve, refinements, doubled = _refine(pool, counts, checker, params)
-    opt = _Optimiser(curve, checker, params)
+    curve, refinements, doubled, samples = _refine(pool, counts, checker, params)
+    opt = _Optimiser(curve, checker, params, samples)
     kappa_before = opt.kappa.copy()
     stats = opt.run()
     stats = IterationStats(stats.tried, stats.accepted, stats.refused, stats.rounds,
@@ -567,17 +629,14 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     ahead[-1] = True
     verts = pts[ahead]
     lines = tuple(a[ahead] for a in lines)  # type: ignore[assignment]
-    stations = polyline_stations(verts)
     first = int(np.searchsorted(vs[ahead], s0 + lead - 1e-9))
     first = min(first, len(verts) - 1)
-    # from the vehicle's position as far as the bands allow (within the spacing cap)
-    cap = int(np.searchsorted(stations, params.max_control_spacing
+    # from the vehicle's position as far as the bands allow
+    cap = int(np.searchsorted(polyline_stations(verts), params.max_control_spacing
                               - float(np.hypot(*(verts[0] - start))), side="right")) - 1
     if cap >= 0:
         first = max(first, _farthest(start, -1, cap, verts, *lines))
-    keep_v = np.zeros(len(verts), dtype=np.int64)
-    keep_v[first + band_simplify(verts[first:], *(a[first:] for a in lines),
-                                 max_spacing=params.max_control_spacing)] = 1
+    kept = first + band_simplify(verts[first:], *(a[first:] for a in lines))
     if start_heading is None:
         direction = verts[first] - start
     else:
@@ -586,9 +645,27 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if norm <= 1e-12:
         raise TrajectoryError("the roadmap's points coincide with the start: no curve")
     heading_point = start + head_len * direction / norm
+    # long legs get extra control points on them (they stay within the bands)
+    vst = vs[ahead]
+    extra_xy, extra_s = [], []
+    for a, b in zip(np.concatenate(([first], kept[:-1])).tolist(), kept.tolist(), strict=True):
+        pieces = int(np.ceil(np.hypot(*(verts[b] - verts[a])) / params.max_control_spacing
+                             - 1e-9))
+        if a == b or pieces <= 1:
+            continue
+        f = np.arange(1, pieces) / pieces
+        extra_xy.append(verts[a] + f[:, None] * (verts[b] - verts[a]))
+        extra_s.append(vst[a] + f * (vst[b] - vst[a]))
+    counts = np.zeros(len(verts), dtype=np.int64)
+    counts[kept] = 1
+    if extra_xy:
+        ex = np.concatenate(extra_xy)
+        es = np.concatenate(extra_s)
+        at = np.searchsorted(vst, es, side="right")
+        verts = np.insert(verts, at, ex, axis=0)
+        counts = np.insert(counts, at, 1)
     pool = np.vstack((start, heading_point, verts))
-    counts = np.concatenate(([1, 1], keep_v)).astype(np.int64)
-    return pool, counts
+    return pool, np.concatenate(([1, 1], counts)).astype(np.int64)
 
 
 def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.bool_],
@@ -616,8 +693,7 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
 
 
 def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, normal: ArrayLike,
-                  centre: ArrayLike, half: ArrayLike, *, max_spacing: float = np.inf
-                  ) -> NDArray[np.int64]:
+                  centre: ArrayLike, half: ArrayLike) -> NDArray[np.int64]:
     """Vertices kept by greedy string pulling through lateral bands.
 
     Vertex ``k`` of the polyline ``points`` ``(m, 2)`` [m] stands on a line through
@@ -625,9 +701,8 @@ def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, norm
     direction across it, along the road). Its band is the part of that line at lateral
     offsets ``centre[k] +- half[k]`` [m]. From the last kept vertex ``i``, the next kept
     vertex is the farthest ``j`` such that every segment ``i -> j'`` with ``j' <= j`` crosses
-    every line ``k`` with ``i < k < j'`` inside its band, and the polyline from ``i`` to ``j``
-    is at most ``max_spacing`` [m] long (always at least ``i + 1``). With ``half = 0`` only
-    collinear vertices go.
+    every line ``k`` with ``i < k < j'`` inside its band (at least ``j = i + 1``). With
+    ``half = 0`` only collinear vertices go.
 
     Returns
     -------
@@ -638,41 +713,52 @@ def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, norm
     m = len(pts)
     if m <= 2:
         return np.arange(m, dtype=np.int64)
-    stations = polyline_stations(pts)
     kept = [0]
     i = 0
     while i < m - 1:
-        cap = int(np.searchsorted(stations, stations[i] + max_spacing + 1e-9, side="right")) - 1
-        cap = min(max(cap, i + 1), m - 1)
-        i = _farthest(pts[i], i, cap, pts, *arrays)
+        i = _farthest(pts[i], i, m - 1, pts, *arrays)  # type: ignore[arg-type]
         kept.append(i)
     return np.asarray(kept, dtype=np.int64)
 
 
 def _farthest(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
               tangent: FloatArray, normal: FloatArray, centre: FloatArray, half: FloatArray,
-              tol: float = 1e-7) -> int:
+              tol: float = 1e-9) -> int:
     """Largest ``j`` in ``(i, cap]`` (at least ``i + 1``) such that every segment
-    ``p -> pts[j']``, ``i < j' <= j``, crosses the lines ``i < k < j'`` inside their bands."""
+    ``p -> pts[j']``, ``i < j' <= j``, crosses the lines ``i < k < j'`` inside their bands.
+
+    The rays from ``p`` that meet band ``k`` form the angle between its two ends (seen
+    from ``p``, relative to the road's direction at ``k``); a segment ``p -> pts[j]``
+    crosses every band before ``j`` if its direction lies in all their angles (running
+    maximum of the lower and minimum of the upper ends), and reaches each line ``k < j``
+    as the lines do not cross.
+    """
     if cap <= i + 1:
         return min(i + 1, len(pts) - 1)
-    js = np.arange(i + 2, cap + 1)
-    ks = np.arange(i + 1, cap)
-    d = pts[js] - p  # (J, 2)
-    tk, nk, ok_ = tangent[ks], normal[ks], origin[ks]
-    num = np.einsum("kd,kd->k", ok_ - p, tk)
-    den = d @ tk.T  # (J, K)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = num[None, :] / den
-    # lateral offset of the crossing: (p + t d - origin) . normal
-    lat = (np.einsum("kd,kd->k", p - ok_, nk)[None, :] + t * (d @ nk.T))
-    inside = ((t >= -tol) & (t <= 1.0 + tol)
-              & (np.abs(lat - centre[ks][None, :]) <= half[ks][None, :] + tol))
-    inside |= ks[None, :] >= js[:, None]  # only the lines before j count
-    good = inside.all(axis=1)
+    ks = np.arange(i + 1, cap + 1)
+    ref = tangent[i + 1] if i + 1 < len(tangent) else tangent[-1]
+    c, s = ref[0], ref[1]
+
+    def angle(q: FloatArray) -> FloatArray:
+        dx, dy = q[:, 0] - p[0], q[:, 1] - p[1]
+        return np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+
+    ends_lo = origin[ks] + (centre[ks] - half[ks])[:, None] * normal[ks]
+    ends_hi = origin[ks] + (centre[ks] + half[ks])[:, None] * normal[ks]
+    a1, a2 = angle(ends_lo), angle(ends_hi)
+    lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
+    # a line through p itself does not constrain the direction
+    on = np.abs(np.einsum("kd,kd->k", origin[ks] - p, tangent[ks])) < 1e-9
+    lo[on], hi[on] = -np.inf, np.inf
+    # bounds from the lines strictly before each candidate
+    low = np.maximum.accumulate(np.concatenate(([-np.inf], lo[:-1])))
+    high = np.minimum.accumulate(np.concatenate(([np.inf], hi[:-1])))
+    th = angle(pts[ks])
+    good = (th >= low - tol) & (th <= high + tol)
+    good[0] = True
     if good.all():
         return cap
-    return int(i + 1 + np.argmin(good))
+    return int(i + np.argmin(good))
 
 
 @dataclass(frozen=True, eq=False)
@@ -721,31 +807,41 @@ class _Curve:
 
 
 def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
-            params: TrajectoryParams) -> tuple[_Curve, int, int]:
+            params: TrajectoryParams) -> tuple[_Curve, int, int, tuple[FloatArray, ...]]:
     """The first curve, repaired locally where its footprint is not clear.
 
     For each sample where the footprint touches an obstacle (with the margin) or leaves the
     road, the left-out candidate nearest to it, among those between the control points that
     shape it, comes back; where none is left there, the shaping control point nearest to
     the sample is doubled (up to ``degree`` copies: repeated control points pull the curve
-    onto its control polygon, undoing the corner cut). At most ``repair_rounds`` rounds.
-    Curvature above the turning limit is left to the optimisation.
+    onto its control polygon, undoing the corner cut). At most ``repair_rounds`` rounds,
+    and none after two rounds that did not improve on the best curve; the least violating
+    curve is returned (footprint first, then curvature: the curvature is left to the
+    optimisation).
 
-    Returns the curve, the rounds and the number of control points doubled.
+    Returns the curve, the rounds, the number of control points doubled and the curve's
+    samples (positions, derivatives, footprint slack, stations) for the optimiser.
     """
     counts = counts.copy()
-    rounds = doubled = 0
+    rounds = doubled = stall = 0
     n_pool = len(pool)
+    best: tuple[tuple[float, float], _Curve, int, int, tuple[FloatArray, ...]] | None = None
     while True:
         pool_idx = np.repeat(np.arange(n_pool), counts)
         curve = _Curve.build(pool[pool_idx], pool_idx, params.degree, params.sample_spacing)
-        if rounds >= params.repair_rounds:
-            return curve, rounds, doubled
-        pos, d1, _ = curve.evaluate()
-        slack = checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]))
+        pos, d1, d2 = curve.evaluate()
+        slack, sc = checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]))
+        kmax = float(np.abs(curvature_from_derivatives(d1, d2)).max())
+        # violation: footprint [m] inside the margin, then curvature beyond the limit
+        score = (max(-float(slack.min()), 0.0), max(kmax - params.kappa_max, 0.0))
+        if best is None or score < best[0]:
+            best = (score, curve, rounds, doubled, (pos, d1, d2, slack, sc))
+            stall = 0
+        else:
+            stall += 1
         bad = np.flatnonzero(slack < 0)
-        if len(bad) == 0:
-            return curve, rounds, doubled
+        if len(bad) == 0 or rounds >= params.repair_rounds or stall >= 2:
+            break
         k = curve.k
         n = len(pool_idx)
         add = np.zeros(n_pool, dtype=bool)
@@ -757,24 +853,30 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
             free = np.flatnonzero(counts[a + 1:b] == 0) + a + 1
             if len(free):
                 add[free[np.argmin(np.hypot(*(pool[free] - pos[j]).T))]] = True
-                continue
-            inner = pool_idx[shaping]
-            inner = inner[(inner >= 2) & (inner < n_pool - 1) & (counts[inner] < k)]
-            if len(inner):
-                dup[inner[np.argmin(np.hypot(*(pool[inner] - pos[j]).T))]] = True
+        if not add.any():
+            # no vertex left to re-insert: double the control point nearest each violation
+            for j in bad.tolist():
+                f = int(curve.first[j])
+                inner = pool_idx[f:min(f + k, n - 1) + 1]
+                inner = inner[(inner >= 2) & (inner < n_pool - 1) & (counts[inner] < k)]
+                if len(inner):
+                    dup[inner[np.argmin(np.hypot(*(pool[inner] - pos[j]).T))]] = True
         if not (add.any() or dup.any()):
-            return curve, rounds, doubled
+            break
         counts[add] = 1
-        dup &= ~add
         counts[dup] += 1
         doubled += int(dup.sum())
         rounds += 1
+    # the least violating curve seen (the first clear one, if any)
+    assert best is not None
+    return best[1], best[2], best[3], best[4]
 
 
 class _Optimiser:
     """Equation (3) on fixed parameter samples, with local re-evaluation."""
 
-    def __init__(self, curve: _Curve, checker: _Checker, params: TrajectoryParams) -> None:
+    def __init__(self, curve: _Curve, checker: _Checker, params: TrajectoryParams,
+                 samples: tuple[FloatArray, ...]) -> None:
         self.ctrl = curve.ctrl.copy()
         first, k, u, knots = curve.first, curve.k, curve.u, curve.knots
         self.first, self.basis, self.k = first, curve.basis, k
@@ -782,10 +884,8 @@ class _Optimiser:
         n = len(self.ctrl)
         self.n = n
         cols = first[:, None] + np.arange(k + 1)[None, :]
-        self.pos, self.d1, self.d2 = curve.evaluate(self.ctrl)
+        self.pos, self.d1, self.d2, self.slack, self.station = (a.copy() for a in samples)
         self.kappa = np.abs(curvature_from_derivatives(self.d1, self.d2))
-        head = np.arctan2(self.d1[:, 1], self.d1[:, 0])
-        self.slack = checker.slack(self.pos, head)
         # samples a move of control point i changes: [lo[i], hi[i])
         idx = np.arange(n)
         self.lo = np.searchsorted(first, idx - k, side="left")
@@ -801,10 +901,10 @@ class _Optimiser:
 
     def _state(self) -> tuple[FloatArray, ...]:
         return tuple(a.copy() for a in (self.ctrl, self.pos, self.d1, self.d2, self.kappa,
-                                        self.slack))
+                                        self.slack, self.station))
 
     def _restore(self, state: tuple[FloatArray, ...]) -> None:
-        self.ctrl, self.pos, self.d1, self.d2, self.kappa, self.slack = state
+        self.ctrl, self.pos, self.d1, self.d2, self.kappa, self.slack, self.station = state
 
     def run(self) -> IterationStats:
         p = self.params
@@ -846,23 +946,28 @@ class _Optimiser:
         """Try moving each control point in ``moves`` to its neighbours' mean."""
         k, p = self.k, self.params
         delta = 0.5 * (self.ctrl[moves - 1] + self.ctrl[moves + 1]) - self.ctrl[moves]
-        lens = self.hi[moves] - self.lo[moves]
-        owner = np.repeat(np.arange(len(moves)), lens)
-        idx = np.concatenate([np.arange(a, b) for a, b in zip(self.lo[moves], self.hi[moves],
-                                                                strict=True)])
+        lo, hi = self.lo[moves], self.hi[moves]
+        lens = hi - lo
+        nm = len(moves)
+        if nm == 1:
+            idx = np.arange(lo[0], hi[0])
+            owner = np.zeros(len(idx), dtype=np.int64)
+        else:
+            owner = np.repeat(np.arange(nm), lens)
+            idx = np.arange(int(lens.sum())) + np.repeat(lo - np.cumsum(lens) + lens, lens)
         r = moves[owner] - self.first[idx]  # column of the moved point in each sample's row
         dlt = delta[owner]
-        pos = self.pos[idx] + self.basis[0, idx, r][:, None] * dlt
-        d1 = self.d1[idx] + self.basis[1, idx, r][:, None] * dlt
-        d2 = self.d2[idx] + self.basis[2, idx, r][:, None] * dlt
+        b = self.basis[:, idx, r]  # (3, q)
+        pos = self.pos[idx] + b[0, :, None] * dlt
+        d1 = self.d1[idx] + b[1, :, None] * dlt
+        d2 = self.d2[idx] + b[2, :, None] * dlt
         kap = np.abs(curvature_from_derivatives(d1, d2))
-        slack = self.checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]))
+        slack, sc = self.checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]), self.station[idx])
         old_k, old_s = self.kappa[idx], self.slack[idx]
         # per sample: samples clear of obstacles and road edges stay clear
         bad = (old_s >= 0) & (slack < 0)
         # per move: the worst violation of the changed stretch (curvature beyond the turning
         # limit, footprint within the margin) does not grow
-        nm = len(moves)
         worse = np.zeros(nm, dtype=bool)
         np.logical_or.at(worse, owner, bad)
         limits = ((kap, old_k, p.kappa_max), (-slack, -old_s, 0.0))
@@ -876,7 +981,7 @@ class _Optimiser:
         keep = acc[owner]
         ki = idx[keep]
         self.pos[ki], self.d1[ki], self.d2[ki] = pos[keep], d1[keep], d2[keep]
-        self.kappa[ki], self.slack[ki] = kap[keep], slack[keep]
+        self.kappa[ki], self.slack[ki], self.station[ki] = kap[keep], slack[keep], sc[keep]
         self.ctrl[moves[acc]] += delta[acc]
         self.refused[moves[~acc]] = True
         for i in moves[acc]:
@@ -920,7 +1025,7 @@ def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
     speed = speed_profile(s, limit, a_max=params.a_max, b_max=params.b_max,
                           start_speed=start_speed, end_speed=end_speed)
     clear_obs = checker.obstacles(pos, head)
-    clear_road = checker.road(pos, head)
+    clear_road, _ = checker.road(pos, head, np.interp(uu, curve.u, opt.station))
     feasible = (np.all(clear_obs >= rp.safety_margin - 1e-6)
                 and np.all(clear_road >= rp.safety_margin - 1e-6)
                 and np.all(np.abs(kappa) <= params.kappa_max * (1 + 1e-6))

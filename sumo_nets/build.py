@@ -24,6 +24,9 @@ COMMANDS: dict[str, list[str]] = {
         "netgenerate", "--grid", "--grid.number", "4", "--grid.length", "150",
         "--default.lanenumber", "2", "--default.speed", "13.89",
     ],
+    "curved.net.xml": [
+        "netconvert", "--node-files", "curved.nod.xml", "--edge-files", "curved.edg.xml",
+    ],
     "city.net.xml": [
         "netconvert", "--node-files", "city.nod.xml", "--edge-files", "city.edg.xml",
         "--connection-files", "city.con.xml", "--tls.default-type", "static",

@@ -2,16 +2,19 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely import affinity
-from shapely.geometry import Polygon, box
+from shapely.geometry import LineString, Polygon, box
 
 from splineplan.corridor import Corridor
-from splineplan.errors import ParameterError, TrajectoryError
+from splineplan.errors import ParameterError, RoadBlockedError, TrajectoryError
 from splineplan.obstacles import Obstacles
+from splineplan.planner import elongate_for_roadmap
 from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
 from splineplan.speed import allowed_speed
 from splineplan.trajectory import (
@@ -63,7 +66,9 @@ def slalom() -> tuple[Corridor, Obstacles, Roadmap]:
     road = straight_road(150.0, 7.0)
     obstacles = Obstacles.from_boxes(
         np.array([[30.0, -1.6], [50.0, 1.6], [70.0, -1.6], [90.0, 1.6]]), 0.0, 4.5, 1.8)
-    return road, obstacles, plan_roadmap(road, obstacles, np.array([1.0, -1.75]))
+    rp = RoadmapParams()
+    return road, obstacles, plan_roadmap(road, elongate_for_roadmap(road, obstacles, rp),
+                                         np.array([1.0, -1.75]), rp)
 
 
 def footprints(tr: Trajectory, rp: RoadmapParams) -> list[Polygon]:
@@ -148,14 +153,15 @@ def test_slalom_optimisation_raises_min_speed_and_stays_feasible() -> None:
 
 
 def test_slalom_every_round_keeps_the_footprint_clear() -> None:
-    """The first curve is too sharp (curvature above the turning limit) but clear of the
-    obstacles; every round keeps the footprint clear and never sharpens the worst bend."""
+    """Every intermediate curve that reports itself feasible is clear (shapely); rounds
+    never sharpen the worst bend; the final curve is feasible."""
     road, obstacles, rm = slalom()
     worst = np.inf
     for cap in (0, 1, 3, 10, 30, 100, 1000):
         tr = plan_trajectory(rm, road, obstacles, TrajectoryParams(max_iterations=cap), 0.0)
         assert tr.iterations.tried <= cap
-        assert shapely_violations(tr, road, obstacles, rm.params) == (0, 0)
+        if tr.feasible:
+            assert shapely_violations(tr, road, obstacles, rm.params) == (0, 0)
         assert tr.min_speed_after >= tr.min_speed_before - 1e-9
         kmax = float(np.abs(tr.curvature).max())
         assert kmax <= worst + 1e-6
@@ -183,12 +189,13 @@ def test_one_obstacle_real_roadmap() -> None:
     rm = plan_roadmap(road, obstacles, np.array([1.0, -3.2]))
     tr = plan_trajectory(rm, road, obstacles, None, 0.0)
     assert tr.feasible
-    assert tr.min_speed_after > tr.min_speed_before + 5.0
+    assert tr.min_speed_after == pytest.approx(TP.s_max)
+    assert tr.iterations.control_points < 15
     assert shapely_violations(tr, road, obstacles, rm.params) == (0, 0)
 
 
 def test_every_accepted_move_keeps_the_curve_feasible() -> None:
-    """Step the cap: each intermediate curve (after any number of moves) is feasible."""
+    """Step the cap: each intermediate curve that reports itself feasible is clear."""
     road = straight_road()
     obstacles = Obstacles.from_boxes(LOBE_OBSTACLES[:3], 0.0, 4.5, 1.8)
     rp = RoadmapParams()
@@ -196,9 +203,10 @@ def test_every_accepted_move_keeps_the_curve_feasible() -> None:
     for cap in (0, 1, 3, 10, 30, 100, 300):
         tr = plan_trajectory(rm, road, obstacles, TrajectoryParams(max_iterations=cap), 0.0)
         assert tr.iterations.tried <= cap
-        assert tr.feasible
-        assert shapely_violations(tr, road, obstacles, rp) == (0, 0)
+        if tr.feasible:
+            assert shapely_violations(tr, road, obstacles, rp) == (0, 0)
         assert tr.min_speed_after >= tr.min_speed_before - 1e-9
+    assert tr.feasible
 
 
 def test_infeasible_start_is_reported_not_hidden() -> None:
@@ -321,3 +329,122 @@ def test_start_heading_is_followed() -> None:
         tr = plan_trajectory(make_roadmap(sine_path(), road), road, Obstacles.empty(),
                              TrajectoryParams(max_iterations=0), h)
         assert tr.heading[0] == pytest.approx(h, abs=1e-9)
+
+
+# ---- band simplification and obstacle fields (real level 2) -------------------------------
+def shapely_check_corridor(tr: Trajectory, corridor: Corridor, obstacles: Obstacles,
+                           rp: RoadmapParams, tol: float = 1e-6) -> tuple[int, int]:
+    """Footprints touching obstacles grown by the margin, and off the road shrunk by it
+    (away from the road's ends, where the footprint overhangs)."""
+    grown = [Polygon(p).buffer(rp.safety_margin - tol) for p in obstacles.polygons()]
+    road = Polygon(corridor.polygon()).buffer(-(rp.safety_margin - tol), join_style=2)
+    st = corridor.to_sl(tr.xy)[:, 0]
+    inner = (st > rp.vehicle_length) & (st < corridor.length - rp.vehicle_length)
+    hits = off = 0
+    for fp, ok in zip(footprints(tr, rp), inner, strict=True):
+        hits += any(fp.intersects(g) for g in grown)
+        off += bool(ok) and not road.contains(fp)
+    return hits, off
+
+
+def real_plan(corridor: Corridor, obstacles: Obstacles, start: np.ndarray,
+              heading: float | None = 0.0) -> tuple[Roadmap, Trajectory]:
+    rp = RoadmapParams()
+    rm = plan_roadmap(corridor, elongate_for_roadmap(corridor, obstacles, rp), start, rp)
+    return rm, plan_trajectory(rm, corridor, obstacles, None, heading)
+
+
+@pytest.mark.parametrize("rho", [0.0, 0.5, 0.8, 1.0])
+def test_band_simplification_keeps_every_segment_in_the_bands(rho: float) -> None:
+    """Independent check with shapely: each kept segment meets every skipped sweep line's
+    band (a LineString across the road), and the kept vertices are far fewer than all."""
+    from benchmarks.fields import obstacle_field
+    from splineplan.trajectory import band_simplify
+
+    corridor, obstacles, start = obstacle_field(300, 20, 9.6, 1)
+    rp = RoadmapParams()
+    rm = plan_roadmap(corridor, elongate_for_roadmap(corridor, obstacles, rp), start, rp)
+    lo, hi = rm.graph_lo[rm.path], rm.graph_hi[rm.path]
+    half = rho * (hi - lo) / 2
+    h = corridor.heading_at(rm.s)
+    tangent = np.column_stack((np.cos(h), np.sin(h)))
+    normal = np.column_stack((-tangent[:, 1], tangent[:, 0]))
+    origin = corridor.to_xy(rm.s, np.zeros_like(rm.s))
+    kept = band_simplify(rm.xy, origin, tangent, normal, rm.l, half)
+    assert kept[0] == 0 and kept[-1] == len(rm.xy) - 1 and np.all(np.diff(kept) > 0)
+    if rho >= 0.5:
+        assert len(kept) < len(rm.xy) / 3
+    for a, b in itertools.pairwise(kept):
+        seg = LineString([rm.xy[a], rm.xy[b]])
+        for k in range(a + 1, b):
+            band = LineString(corridor.to_xy(np.full(2, rm.s[k]),
+                                             rm.l[k] + np.array([-1, 1]) * (half[k] + 1e-6)))
+            assert seg.intersects(band), (a, b, k)
+
+
+@pytest.mark.parametrize(("n_obs", "seed"), [(20, s) for s in range(5)] + [(40, 2), (40, 4)])
+def test_benchmark_fields_are_feasible(n_obs: int, seed: int) -> None:
+    """The benchmark's fields where a car-sized passage exists (40 obstacles: seeds 0 and 3
+    are closed for the rectangle, level 2 says so; seed 1 needs a lane change of 4 m
+    within 1 m)."""
+    from benchmarks.fields import obstacle_field
+
+    corridor, obstacles, start = obstacle_field(300, n_obs, 9.6, seed)
+    rm, tr = real_plan(corridor, obstacles, start)
+    assert tr.feasible
+    assert tr.iterations.control_points < 60
+    assert shapely_check_corridor(tr, corridor, obstacles, rm.params) == (0, 0)
+
+
+def random_field(rng: np.random.Generator, curved: bool, n: int, gap: float
+                 ) -> tuple[Corridor, Obstacles, np.ndarray]:
+    """Cars on a 9.6 m road (straight or an arc of radius 150 m), each leaving at least
+    ``gap`` [m] free beside it on one side."""
+    length = 150.0
+    if curved:
+        th = np.linspace(0.0, length / 150.0, 200)
+        ref = np.column_stack((150.0 * np.sin(th), 150.0 * (1.0 - np.cos(th))))
+        cor = Corridor.from_reference(ref, np.full(200, 4.8), np.full(200, -4.8))
+    else:
+        cor = straight_road(length, 9.6)
+    st = np.sort(rng.uniform(25.0, length - 15.0, n))
+    st = st[np.concatenate(([True], np.diff(st) > 12.0))]  # rows apart: a passage exists
+    side = rng.choice([-1.0, 1.0], len(st))
+    lat = side * (4.8 - 0.9 - rng.uniform(0.0, 9.6 - 1.8 - gap, len(st)))
+    obs = Obstacles.from_boxes(cor.to_xy(st, lat), cor.heading_at(st)
+                               + rng.uniform(-0.1, 0.1, len(st)), 4.5, 1.8)
+    return cor, obs, cor.to_xy(np.array([1.0]), np.array([rng.uniform(-3.0, 3.0)]))[0]
+
+
+def _random_fields(seed: int, n: int, curved: bool) -> bool | None:
+    rng = np.random.default_rng(seed)
+    cor, obs, start = random_field(rng, curved, n, gap=3.5)
+    try:
+        rm, tr = real_plan(cor, obs, start, float(cor.heading_at(1.0)))
+    except RoadBlockedError:
+        return None
+    if tr.feasible:
+        assert shapely_check_corridor(tr, cor, obs, rm.params) == (0, 0)
+    assert tr.min_speed_after >= tr.min_speed_before - 1e-9
+    return tr.feasible
+
+
+@settings(max_examples=15, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 8), curved=st.booleans())
+def test_random_obstacle_fields_real_roadmap(seed: int, n: int, curved: bool) -> None:
+    _random_fields(seed, n, curved)
+
+
+def test_random_obstacle_fields_mostly_feasible() -> None:
+    """Fields with a passage 3.5 m wide (1.7 m wider than the car): at least 90 % feasible."""
+    outcomes = [_random_fields(seed, 1 + seed % 8, bool(seed % 2)) for seed in range(30)]
+    done = [o for o in outcomes if o is not None]
+    assert len(done) >= 20
+    assert np.mean(done) >= 0.9, f"{np.mean(done):.2f} of {len(done)} feasible"
+
+
+@pytest.mark.slow
+@settings(max_examples=200, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12), curved=st.booleans())
+def test_random_obstacle_fields_real_roadmap_slow(seed: int, n: int, curved: bool) -> None:
+    _random_fields(seed, n, curved)

@@ -1,0 +1,184 @@
+"""Scenario bench: generated fields, the suite on both executors, its table and failures."""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import statistics
+import typing
+from pathlib import Path
+
+import pytest
+from conftest import NETS
+
+from splineplan import bench, fields, sim
+from splineplan.errors import ParameterError
+
+DRIVERS = ("planner", "sumo")
+#: Whether the closed loop runs SUMO's default model (no sublanes) for driver "sumo".
+SUMO_DEFAULT_MODEL = "sublane" in typing.get_args(sim.Driver)
+EGO_WIDTH, MARGIN = 1.8, 0.25
+
+
+def _road() -> fields.RoadSpec:
+    return bench.road_spec("straight", edges=("e0", "e1"), field_start=60.0,
+                           field_end=170.0)
+
+
+def _cases(tmp: Path) -> list[bench.BenchCase]:
+    """A sparse field, a field that blocks every lane, and a case naming a missing edge."""
+    road = _road()
+    a = bench.generated_case(road, "sparse", 3, tmp, index=0, duration=40.0)
+    b = bench.generated_case(road, "blocked", 0, tmp, index=1, duration=40.0)
+    broken = tmp / "missing_edge.toml"
+    broken.write_text(f'name = "missing_edge"\nnetwork = "{NETS / "straight.net.xml"}"\n'
+                      '[ego]\nstart_edge = "no_such_edge"\ngoal_edge = "e1"\n'
+                      "[sim]\nduration = 10.0\n")
+    c = bench.BenchCase(2, "missing_edge_s0", str(broken), 0, "bundled", "missing_edge")
+    return [a, b, c]
+
+
+@pytest.fixture(scope="module")
+def suite_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("bench_cases")
+
+
+@pytest.fixture(scope="module")
+def local(suite_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> bench.BenchResult:
+    out = tmp_path_factory.mktemp("bench_local")
+    return bench.run_suite(_cases(suite_dir), out_dir=out, drivers=DRIVERS, workers=2,
+                           progress=False)
+
+
+def test_fields_are_reproducible_and_every_lane_blocked_but_passable() -> None:
+    road = _road()
+    f1 = fields.generate_field(road, "blocked", seed=5)
+    assert f1 == fields.generate_field(road, "blocked", seed=5)
+    assert f1.vehicles != fields.generate_field(road, "blocked", seed=6).vehicles
+    dense = fields.generate_field(road, "dense", seed=5)
+    sparse = fields.generate_field(road, "sparse", seed=5)
+    assert dense.density > sparse.density > 0
+    assert fields.generate_field(road, "empty", seed=5).vehicles == ()
+    lane_w = 3.2
+    n = road.lanes
+    rows = [f1.vehicles[i:i + n] for i in range(0, len(f1.vehicles), n)]
+    assert len(rows) >= 2
+    for row in rows:
+        # one row: neighbours within a few metres, the next row far behind
+        assert max(v.station for v in row) - min(v.station for v in row) < 10.0
+        # a stopped vehicle in every lane: no free lane for a lane-based driver
+        assert sorted(v.lane for v in row) == list(range(road.lanes))
+        # lateral extents at lane centres: some gap between neighbours fits the ego
+        ext = sorted(((v.lane + 0.5) * lane_w - fields.VEHICLE_TYPES[v.vtype].width / 2,
+                      (v.lane + 0.5) * lane_w + fields.VEHICLE_TYPES[v.vtype].width / 2)
+                     for v in row)
+        gaps = [b[0] - a[1] for a, b in itertools.pairwise(ext)]
+        assert max(gaps) > EGO_WIDTH + 2 * MARGIN
+    with pytest.raises(ParameterError, match="unknown tier"):
+        fields.generate_field(road, "hard", seed=0)
+
+
+def _expected_lines(csv_path: Path) -> list[str]:
+    """The summary's table lines, recomputed from runs.csv with the csv module."""
+    with csv_path.open(newline="") as fh:
+        runs = list(csv.DictReader(fh))
+    keys = list(dict.fromkeys((r["tier"], r["driver"]) for r in runs))
+    lines = []
+    for tier, driver in keys:
+        sel = [r for r in runs if r["tier"] == tier and r["driver"] == driver]
+        arrived = [r for r in sel if r["arrived"] == "True"]
+        clear = [float(r["min_clearance"]) for r in sel if r["min_clearance"]]
+        travel = [float(r["travel_time"]) for r in arrived]
+
+        def f(xs: list[float], d: int) -> str:
+            return "-" if not xs else f"{xs[0]:.{d}f}"
+
+        cm = f([statistics.mean(clear)] if clear else [], 2)
+        cmed = f([statistics.median(clear)] if clear else [], 2)
+        tm = f([statistics.mean(travel)] if travel else [], 1)
+        tmed = f([statistics.median(travel)] if travel else [], 1)
+        lines.append(f"| {driver} | {len(sel)} | {len(arrived)} | "
+                     f"{100 * len(arrived) / len(sel):.0f}% | {cm} | {cmed} | {tm} | {tmed} |")
+    return lines
+
+
+def _check_outputs(res: bench.BenchResult) -> None:
+    out = Path(res.files[0]).parent
+    table = (out / "summary.md").read_text()
+    for line in _expected_lines(out / "runs.csv"):
+        assert line in table
+    assert [r["case"] for r in res.rows] == [c.name for c in res.cases for _ in DRIVERS]
+    assert [r["driver"] for r in res.rows] == list(DRIVERS) * len(res.cases)
+    for name in ("bench_success.png", "bench_clearance.png", "bench_travel_time.png"):
+        assert (out / name).stat().st_size > 10_000
+
+
+def test_local_pool_runs_the_suite_and_the_table_holds_its_numbers(
+        local: bench.BenchResult) -> None:
+    _check_outputs(local)
+    sparse = [r for r in local.rows if r["tier"] == "sparse"]
+    assert all(r["arrived"] and r["travel_time"] > 0 for r in sparse)
+    assert all(r["wall_time"] > 0 for r in local.rows if not r["error"])
+    planner = next(r for r in sparse if r["driver"] == "planner")
+    assert planner["replans"] >= 1 and planner["wall_planner"] > 0
+    assert planner["min_clearance"] is not None and planner["collisions"] == 0
+
+
+def test_a_crashing_case_is_a_failed_row_and_the_suite_goes_on(
+        local: bench.BenchResult) -> None:
+    broken = [r for r in local.rows if r["case"] == "missing_edge_s0"]
+    assert len(broken) == len(DRIVERS)
+    for r in broken:
+        assert r["status"] == "failed" and not r["arrived"]
+        assert "no_such_edge" in r["error"]
+    # the cases around it ran
+    assert sum(r["arrived"] for r in local.rows if r["case"] != "missing_edge_s0") >= 3
+    assert "no_such_edge" in Path(local.files[2]).read_text()
+
+
+def test_blocked_field_planner_arrives(local: bench.BenchResult) -> None:
+    planner = next(r for r in local.rows if r["tier"] == "blocked" and r["driver"] == "planner")
+    assert planner["arrived"], planner["reason"]
+    assert planner["collisions"] == 0
+    assert planner["min_clearance"] > 0.0
+
+
+@pytest.mark.skipif(not SUMO_DEFAULT_MODEL,
+                    reason="splineplan.sim has no separate sublane driver yet: its 'sumo' "
+                           "driver runs with --lateral-resolution")
+def test_blocked_field_sumo_default_driver_does_not_arrive(local: bench.BenchResult) -> None:
+    sumo = next(r for r in local.rows if r["tier"] == "blocked" and r["driver"] == "sumo")
+    assert not sumo["arrived"]
+    assert sumo["status"] == "timeout", sumo["reason"]
+
+
+def test_dask_local_cluster_gives_the_same_rows(
+        local: bench.BenchResult, suite_dir: Path, tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=None) as cluster:
+        res = bench.run_suite(_cases(suite_dir), out_dir=tmp_path, drivers=DRIVERS,
+                              scheduler=cluster.scheduler_address, progress=False)
+    assert res.executor.startswith("dask")
+    _check_outputs(res)
+    assert bench.comparable(res.rows) == bench.comparable(local.rows)
+    assert bench.comparable(bench.read_runs_csv(tmp_path / "runs.csv")) == bench.comparable(
+        bench.read_runs_csv(Path(local.files[0])))
+
+
+def test_suite_building_and_bad_input(tmp_path: Path) -> None:
+    cases = bench.build_suite("quick", seeds=2, out_dir=tmp_path)
+    assert [c.index for c in cases] == list(range(len(cases)))
+    assert len({c.name for c in cases}) == len(cases) == 6
+    for c in cases:
+        if c.tier != "bundled":
+            assert Path(c.scenario).is_file() and c.obstacles > 0
+    again = bench.build_suite("quick", seeds=2, out_dir=tmp_path / "again")
+    first = Path(cases[-1].scenario).with_suffix(".rou.xml").read_text()
+    assert Path(again[-1].scenario).with_suffix(".rou.xml").read_text() == first
+    with pytest.raises(ParameterError, match="unknown suite"):
+        bench.build_suite("nope", out_dir=tmp_path)
+    with pytest.raises(ParameterError, match="unknown tier"):
+        bench.build_suite("quick", tiers=["hard"], out_dir=tmp_path)
+    with pytest.raises(ParameterError, match="unknown driver"):
+        bench.run_suite(cases, out_dir=tmp_path, drivers=("autopilot",), progress=False)
