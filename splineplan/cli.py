@@ -218,6 +218,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--gui", action="store_true", help="watch in sumo-gui (through traci)")
     p.add_argument("--seed", type=int, default=None, help="SUMO's random seed")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--driver", choices=("planner", "sumo", "sublane"), default="planner",
+                   help="who drives the ego: the planner (default), SUMO's lane-based "
+                        "model or SUMO's sublane model (baselines)")
     p.set_defaults(func=_cmd_simulate)
 
 
@@ -230,7 +233,7 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     out = Path(args.out) if args.out else Path("runs") / scenario.name
     result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
-                      progress=False if args.no_progress else None)
+                      progress=False if args.no_progress else None, driver=args.driver)
     m = result.metrics
     print(f"{scenario.name}: {result.status}: {result.reason}")
     print(f"  travel time {m['travel_time'] or 0:.1f} s, distance {m['distance']:.1f} m, "

@@ -94,35 +94,34 @@ CURVATURE_SPAN = 2.0
 def path_curvature(x: ArrayLike, y: ArrayLike, *, span: float = CURVATURE_SPAN) -> FloatArray:
     """Signed curvature [1/m] of a driven path at each of its samples, from positions only.
 
-    The paper's equation (2) on the path itself: with ``P(s)`` the path at arc length ``s``
-    (linear between samples), ``kappa(s) = |P(s + h) + P(s - h) - 2 P(s)| / h^2``, positive
-    for left turns. ``h`` is ``span`` [m], or twice the largest distance between consecutive
-    samples where that is longer (a span near the sample spacing would see the polyline's
-    corners instead of the curve). Near the ends, ``s`` is clamped to
-    ``[h, L - h]``. Samples where the vehicle stands share its curvature there.
+    At sample ``i`` (arc length ``s_i``), the circle through three driven samples: ``i``, the
+    last one at least ``span`` [m] of path before it and the first one at least ``span``
+    after it; ``kappa = 4 A / (a b c)`` (Menger curvature: ``A`` the triangle's area, ``a, b,
+    c`` its sides), positive for left turns. The points are the samples themselves (no
+    interpolation), so a path along a circle gives exactly ``1/R``. Samples within ``span``
+    of either end take the value of the nearest sample that has both neighbours.
 
-    ``x``, ``y``: ``(n,)`` [m]. Returns ``(n,)``; zeros for a path shorter than ``2 h``.
+    ``x``, ``y``: ``(n,)`` [m]. Returns ``(n,)``; zeros for a path shorter than ``2 span``.
     """
     xs = np.asarray(x, dtype=float)
     ys = np.asarray(y, dtype=float)
     n = len(xs)
     if n < 3:
         return np.zeros(n)
-    step = np.hypot(np.diff(xs), np.diff(ys))
-    s = np.concatenate(([0.0], np.cumsum(step)))
-    h = max(float(span), 2.0 * float(step.max()))
-    if s[-1] < 2.0 * h:
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(xs), np.diff(ys)))))
+    h = float(span)
+    lo = np.searchsorted(s, s - h, side="right") - 1  # last sample at least h before
+    hi = np.searchsorted(s, s + h, side="left")  # first sample at least h after
+    valid = np.flatnonzero((lo >= 0) & (hi < n))
+    if not len(valid):
         return np.zeros(n)
-    # distinct stations only (the vehicle standing adds samples at one station)
-    keep = np.concatenate(([True], step > 1e-9))
-    sk, xk, yk = s[keep], xs[keep], ys[keep]
-    c = np.clip(s, h, s[-1] - h)
-    px = [np.interp(c + k * h, sk, xk) for k in (-1, 0, 1)]
-    py = [np.interp(c + k * h, sk, yk) for k in (-1, 0, 1)]
-    ddx = px[2] + px[0] - 2.0 * px[1]
-    ddy = py[2] + py[0] - 2.0 * py[1]
-    turn = np.sign((px[1] - px[0]) * (py[2] - py[1]) - (py[1] - py[0]) * (px[2] - px[1]))
-    return np.asarray(turn * np.hypot(ddx, ddy) / (h * h))
+    i, j, k = valid, lo[valid], hi[valid]
+    ax, ay = xs[i] - xs[j], ys[i] - ys[j]
+    bx, by = xs[k] - xs[i], ys[k] - ys[i]
+    cross = ax * by - ay * bx  # twice the signed area
+    sides = np.hypot(ax, ay) * np.hypot(bx, by) * np.hypot(xs[k] - xs[j], ys[k] - ys[j])
+    kv = 2.0 * cross / np.where(sides > 0, sides, 1.0)
+    return np.asarray(np.interp(np.arange(n), valid, kv))
 
 
 def dynamics(
@@ -133,10 +132,10 @@ def dynamics(
 
     ``t`` ``(n,)`` [s], ``x``, ``y`` ``(n,)`` [m] (the vehicle's centre), ``speed`` ``(n,)``
     [m/s]. Lateral acceleration [m/s^2] is ``v^2 * kappa`` with ``kappa`` from
-    :func:`path_curvature` (positions only, over ``span`` [m] of path: independent of the
-    headings the vehicle reported). Longitudinal acceleration is ``dv/dt`` and jerk
-    [m/s^3] is the rate of change of ``(a_lon, a_lat)``, both by central differences in
-    time (``numpy.gradient``).
+    :func:`path_curvature` (positions only, over ``span`` [m] of path either side:
+    independent of the headings the vehicle reported). Longitudinal acceleration is
+    ``dv/dt`` and jerk [m/s^3] is the rate of change of ``(a_lon, a_lat)``, both by
+    central differences in time (``numpy.gradient``).
     """
     tt = np.asarray(t, dtype=float)
     v = np.asarray(speed, dtype=float)

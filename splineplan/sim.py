@@ -3,7 +3,8 @@
 This is the only module that imports ``libsumo`` (and ``traci``, for ``gui=True``). Each step
 of a headless SUMO run:
 
-1. read the vehicles around the ego (one context subscription): stopped or parked vehicles,
+1. read the ego and the vehicles around it (one subscription each, no per-vehicle getters):
+   stopped or parked vehicles,
    and polygons of type ``obstacle``, within the look-ahead along the route are obstacles;
 2. replan (levels 2 and 3 on a window of the route's corridor, ``lookahead`` metres long)
    when the window runs short, when the set of obstacles ahead changes, when SUMO put the ego
@@ -18,6 +19,14 @@ of a headless SUMO run:
 5. check that SUMO put the ego where asked, and check the ego's footprint against every
    other vehicle's footprint and against the road (SUMO's own collision check runs too, with
    ``--collision.action warn``; nothing is teleported: ``--time-to-teleport -1``).
+
+Drivers (``driver=``): ``planner`` as above; ``sumo`` and ``sublane`` let SUMO's own models
+drive the ego along the same level-1 route (the benchmark's baselines), with the same
+observation and safety checks and no planning. The planner's runs use SUMO's sublane model
+(``--lateral-resolution`` :data:`LATERAL_RESOLUTION`): the ego leans into a neighbouring lane
+to pass an obstacle, and lane-based SUMO maps it onto one lane only, so cars on the other lane
+do not see it (with two stopped cars closing two of three lanes and fast traffic on the
+third, a car passed the ego with 0.05 m to spare lane-based, 0.96 m with sublanes).
 
 Outputs in ``out_dir``: ``metrics.json``, ``trajectory.csv`` (the driven path), ``fcd.xml``
 (SUMO's floating car data), ``sumo.log``, and with ``plot=True`` pictures. A run that fails
@@ -1135,9 +1144,8 @@ class _Run:
             "max_lateral_acceleration": float(np.abs(d["a_lat"]).max()) if len(t) else None,
             "max_curvature": float(np.abs(d["curvature"]).max()) if len(t) else None,
             "lateral_acceleration_method": (
-                "v^2 * kappa; kappa of the driven centre positions by the second difference "
-                f"|P(s+h) + P(s-h) - 2 P(s)| / h^2 over arc length, h = max({CURVATURE_SPAN:g} "
-                "m, twice the largest sample spacing)"),
+                "v^2 * kappa; kappa of the circle through the driven centre positions at "
+                f"each sample and {CURVATURE_SPAN:g} m of path before and after it"),
             "max_longitudinal_acceleration": float(np.abs(d["a_lon"]).max()) if len(t) else None,
             "max_jerk": float(d["jerk"].max()) if len(t) else None,
             "replans": [r.__dict__ for r in self.replans],

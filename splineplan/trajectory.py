@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline
+from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from splineplan.corridor import Corridor
 from splineplan.errors import ParameterError, TrajectoryError
@@ -327,6 +328,7 @@ class _Checker:
     bbox: FloatArray  # (K, 4)
     body: FloatArray = field(init=False)  # (2, q) body-frame points: footprint, then centre
     frames: tuple[FloatArray, ...] = field(init=False)
+    window: tuple[FloatArray, ...] = field(init=False)
 
     def __post_init__(self) -> None:
         hl, hw = self.half_length, self.half_width
@@ -337,9 +339,20 @@ class _Checker:
         st = np.asarray(cor.s, dtype=float)
         h = cor.heading_at(st[:-1])
         ref = np.asarray(cor.reference, dtype=float)
+        left, right = np.asarray(cor.left, dtype=float), np.asarray(cor.right, dtype=float)
         object.__setattr__(self, "frames", (
-            st, ref[:-1, 0].copy(), ref[:-1, 1].copy(), np.cos(h), np.sin(h),
-            np.asarray(cor.left, dtype=float), np.asarray(cor.right, dtype=float)))
+            st, ref[:-1, 0].copy(), ref[:-1, 1].copy(), np.cos(h), np.sin(h), left, right))
+        # per segment, over the stations the footprint can reach from it: the narrowest
+        # boundaries and the largest turn of the reference line (for a quick clear test)
+        ds = np.diff(st)
+        w = int(np.ceil((np.hypot(hl, hw) + 1.0) / max(float(np.quantile(ds, 0.1)), 1e-3)))
+        size = min(2 * w + 1, 2 * len(ds) + 1)
+        lmin = minimum_filter1d(left, size, mode="nearest")[:-1]
+        rmax = maximum_filter1d(right, size, mode="nearest")[:-1]
+        hh = np.unwrap(h)
+        turn = (maximum_filter1d(hh, size, mode="nearest")
+                - minimum_filter1d(hh, size, mode="nearest"))
+        object.__setattr__(self, "window", (lmin, rmax, turn))
 
     @classmethod
     def build(cls, corridor: Corridor, obstacles: Obstacles, params: RoadmapParams,
@@ -398,22 +411,65 @@ class _Checker:
               ) -> tuple[FloatArray, FloatArray]:
         """Footprint clearance [m] beyond the safety margin (negative: too close), and the
         centres' stations [m] (see :meth:`road`)."""
-        road, sc_new = self.road(xy, heading, sc)
-        near = self.obstacles(xy, heading, horizon=0.01)
+        if sc is None:
+            sc = self.stations(xy)
+        # the centres in the frame of the reference segment at their station (from the
+        # estimate, one step of refinement)
+        st, rx, ry, hc, hs, _, _ = self.frames
+        lmin, rmax, turn = self.window
+        sc_new = sc
+        for _ in range(2):
+            i = np.searchsorted(st, sc_new, side="right") - 1
+            np.clip(i, 0, len(st) - 2, out=i)
+            dx, dy = xy[:, 0] - rx[i], xy[:, 1] - ry[i]
+            ci, si = hc[i], hs[i]
+            sc_new = st[i] + dx * ci + dy * si
+        lat = dy * ci - dx * si
+        # clearly on the road (a lower bound of the clearance is above the margin): no
+        # exact check of the footprint
+        dh = heading - np.arctan2(si, ci)
+        ext = (self.half_length * np.abs(np.sin(dh)) + self.half_width * np.abs(np.cos(dh))
+               + (np.abs(lat) + self.half_length + self.half_width) * turn[i] + 0.05)
+        road = np.minimum(lmin[i] - lat, lat - rmax[i]) - ext
+        near_edge = np.flatnonzero(road < self.margin + 1e-6)
+        if len(near_edge):
+            road[near_edge], sc_new[near_edge] = self.road(
+                xy[near_edge], heading[near_edge], sc[near_edge])
+        near = self.obstacles(xy, heading, horizon=0.0, cull=True)
         return np.minimum(near, road) - self.margin, sc_new
 
     def obstacles(self, xy: FloatArray, heading: FloatArray,
-                  horizon: float = CLEARANCE_HORIZON) -> FloatArray:
+                  horizon: float = CLEARANCE_HORIZON, cull: bool = False) -> FloatArray:
         """Distance [m] of the footprint to the nearest obstacle, ``inf`` beyond
-        ``margin + horizon`` (obstacles are culled by bounding box)."""
+        ``margin + horizon`` (obstacles are culled by bounding box; with ``cull``, also
+        those separated by more than that along the footprint's axes, so that ``inf``
+        may stand for any distance beyond ``margin + horizon``)."""
         out = np.full(len(xy), np.inf)
         if len(self.polys) == 0 or len(xy) == 0:
             return out
         r = np.hypot(self.half_length, self.half_width) + self.margin + horizon
         b = self.bbox
+        lo, hi = xy.min(axis=0) - r, xy.max(axis=0) + r
+        near = np.flatnonzero((b[:, 0] <= hi[0]) & (b[:, 2] >= lo[0]) & (b[:, 1] <= hi[1])
+                              & (b[:, 3] >= lo[1]))
+        if len(near) == 0:
+            return out
+        b = b[near]
         x, y = xy[:, 0, None], xy[:, 1, None]
         hit = (b[:, 0] <= x + r) & (b[:, 2] >= x - r) & (b[:, 1] <= y + r) & (b[:, 3] >= y - r)
         js, os = np.nonzero(hit)
+        os = near[os]
+        if len(js) and cull:
+            c, s = np.cos(heading[js])[:, None], np.sin(heading[js])[:, None]
+            pol = self.polys[os]
+            rx, ry = pol[..., 0] - xy[js, 0, None], pol[..., 1] - xy[js, 1, None]
+            u, v = rx * c + ry * s, ry * c - rx * s
+            gap = self.margin + horizon
+            keep = ((u.min(axis=1) < self.half_length + gap)
+                    & (u.max(axis=1) > -self.half_length - gap)
+                    & (v.min(axis=1) < self.half_width + gap)
+                    & (v.max(axis=1) > -self.half_width - gap))
+            js, os = js[keep], os[keep]
         if len(js) == 0:
             return out
         d = _rect_polygon_distance(xy[js], heading[js], self.half_length, self.half_width,

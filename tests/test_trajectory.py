@@ -382,11 +382,10 @@ def test_band_simplification_keeps_every_segment_in_the_bands(rho: float) -> Non
             assert seg.intersects(band), (a, b, k)
 
 
-@pytest.mark.parametrize(("n_obs", "seed"), [(20, s) for s in range(5)] + [(40, 2), (40, 4)])
+@pytest.mark.parametrize(("n_obs", "seed"), [(20, s) for s in range(5)]
+                         + [(40, s) for s in range(6)])
 def test_benchmark_fields_are_feasible(n_obs: int, seed: int) -> None:
-    """The benchmark's fields where a car-sized passage exists (40 obstacles: seeds 0 and 3
-    are closed for the rectangle, level 2 says so; seed 1 needs a lane change of 4 m
-    within 1 m)."""
+    """The benchmark's fields (each keeps a drivable passage for the car) end feasible."""
     from benchmarks.fields import obstacle_field
 
     corridor, obstacles, start = obstacle_field(300, n_obs, 9.6, seed)
