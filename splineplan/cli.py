@@ -272,11 +272,10 @@ def _cmd_plan(args: argparse.Namespace) -> int:
 
     from splineplan.io import save_plan
     from splineplan.network import load_network, read_obstacles
+    from splineplan.obstacles import Obstacles
     from splineplan.pipeline import plan
     from splineplan.roadmap import RoadmapParams
     from splineplan.trajectory import TrajectoryParams
-
-    from splineplan.obstacles import Obstacles
 
     net = load_network(args.net)
     obstacles = read_obstacles(net, args.obstacles) if args.obstacles else Obstacles.empty()

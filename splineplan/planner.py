@@ -1,9 +1,12 @@
 """Levels 2 and 3 along a whole corridor: segments planned in turn and joined.
 
-The corridor is cut into overlapping segments of ``RoadmapParams.segment_length``. Each
-segment's roadmap and trajectory start from the pose of the previous segment's trajectory at a
-join point half-way into their overlap, so position and heading are continuous there; the speed
-profile then runs once over the joined curve, so speed is continuous too.
+The corridor is cut into overlapping segments of at most ``RoadmapParams.segment_length``.
+Each segment's roadmap and trajectory start from the pose of the previous segment's
+trajectory at a join point half-way into their overlap, so position and heading are
+continuous there; the speed profile then runs once over the joined curve, so speed is
+continuous too. The cuts are placed where the road is straightest and keeps its width
+(:func:`cut_stations`): a join inside a tight turn would restart the next curve with zero
+curvature there, and a segment's end inside a turn ends its curve on a clamped corner.
 
 Level 2 models the vehicle as a disc of its width; a rectangle's corners reach
 ``(vehicle_length - vehicle_width) / 2`` [m] further ahead and behind. So level 2 plans among
@@ -21,6 +24,7 @@ from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike
 
 from splineplan.corridor import Corridor
@@ -40,7 +44,10 @@ from splineplan.trajectory import (
 log = logging.getLogger(__name__)
 
 #: Overlap [m] of consecutive segments (at most a quarter of the segment length).
-SEGMENT_OVERLAP = 20.0
+SEGMENT_OVERLAP = 30.0
+#: Fraction of ``segment_length`` within which a segment's end is chosen (see
+#: :func:`cut_stations`): each segment is between this fraction and all of it long.
+CUT_WINDOW = 0.6
 
 
 @dataclass(frozen=True, eq=False)
@@ -94,8 +101,8 @@ def plan_corridor(
     rp = roadmap_params or RoadmapParams()
     tp = params or TrajectoryParams()
     overlap = min(SEGMENT_OVERLAP, rp.segment_length / 4.0)
-    pieces = corridor.segments(rp.segment_length, overlap) if corridor.length > \
-        rp.segment_length else [corridor]
+    cuts = cut_stations(corridor, rp.segment_length, overlap)
+    pieces = [corridor.slice(a, b) for a, b in cuts] if len(cuts) > 1 else [corridor]
     pose = np.asarray(start_xy, dtype=float).reshape(2)
     heading = start_heading
     speed = start_speed
@@ -130,6 +137,44 @@ def plan_corridor(
     joined = _join(parts, tp, start_speed, end_speed)
     t_traj += time.perf_counter() - t2
     return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
+
+
+def cut_stations(corridor: Corridor, length: float, overlap: float
+                 ) -> list[tuple[float, float]]:
+    """Start and end stations [m] of overlapping segments at most ``length`` [m] long.
+
+    Each segment ends between ``CUT_WINDOW * length`` and ``length`` from its start, where
+    the overlap ``[end - overlap, end]`` with the next segment is straightest: smallest
+    largest turn of the reference line and change of the road's width over it (ties: the
+    farthest end). The next segment starts at ``end - overlap``.
+    """
+    total = corridor.length
+    if total <= length:
+        return [(0.0, total)]
+    grid = np.arange(0.0, total + 0.5, 1.0)
+    grid[-1] = min(grid[-1], total)
+    head = np.unwrap(corridor.heading_at(grid))
+    right, left = corridor.bounds_at(grid)
+    win = max(int(round(overlap)), 1)
+
+    def spread(a: FloatArray) -> FloatArray:
+        # range of a over [grid[j] - overlap, grid[j]] for each j
+        w = sliding_window_view(np.concatenate((np.full(win, a[0]), a)), win + 1)
+        return np.asarray(w.max(axis=1) - w.min(axis=1))
+
+    # 0.1 rad of turn weighs like 1 m of width change; rounded so that ties go farthest
+    bad = np.round(10.0 * spread(head) + spread(np.asarray(left - right)), 1)
+    cuts: list[tuple[float, float]] = []
+    a = 0.0
+    while total - a > length:
+        lo = int(np.ceil(a + max(CUT_WINDOW * length, overlap + 1.0)))
+        hi = int(np.floor(a + length))
+        cand = np.arange(lo, hi + 1)
+        j = int(cand[::-1][np.argmin(bad[cand[::-1]])])
+        cuts.append((a, float(grid[j])))
+        a = float(grid[j]) - overlap
+    cuts.append((a, total))
+    return cuts
 
 
 def elongate_for_roadmap(corridor: Corridor, obstacles: Obstacles,

@@ -292,10 +292,15 @@ def _check_start(corridor: Corridor, s0: float, l0: float) -> None:
 
 
 def _stations(length: float, d: float) -> FloatArray:
+    """Stations ``0, d, 2d, ...`` and the end; a last gap shorter than ``d / 2`` is merged
+    into the one before (a very short last step would end level 3's curve on a kink)."""
     n = math.floor(length / d + 1e-9)
     s = np.arange(n + 1, dtype=float) * d
     if length - s[-1] > 1e-6:
-        s = np.append(s, length)
+        if length - s[-1] < d / 2.0 and len(s) > 1:
+            s[-1] = length
+        else:
+            s = np.append(s, length)
     else:
         s[-1] = min(s[-1], length)
     return np.asarray(s, dtype=float)

@@ -110,6 +110,13 @@ class TrajectoryParams:
         The lead-in: roadmap vertices closer ahead of the vehicle than
         ``max(lead_in_lengths * vehicle_length, lead_in_time * start_speed)`` [m] are not
         control points at first, so that a lateral offset is taken over that distance.
+    lateral_rate
+        Largest lateral change [m per m of station] that the control points' tube allows
+        (:func:`lateral_tube`): where the roadmap steps sideways faster (a width step at a
+        junction entry, a lane change between parked cars), the step is spread over
+        ``step / lateral_rate`` metres ahead of it.
+    band_reserve
+        Room [m] that each band leaves to its free interval's ends on each side.
     """
 
     degree: int = 3
@@ -126,13 +133,15 @@ class TrajectoryParams:
     repair_rounds: int = 6
     lead_in_lengths: float = 2.0
     lead_in_time: float = 1.5
+    lateral_rate: float = 0.15
+    band_reserve: float = 0.15
 
     def __post_init__(self) -> None:
         if not isinstance(self.degree, int | np.integer) or not 2 <= self.degree <= 5:
             raise ParameterError(f"TrajectoryParams.degree must be an integer in 2..5, "
                                  f"got {self.degree!r}")
         for name in ("mu", "g", "s_max", "a_max", "b_max", "sample_spacing", "min_turn_radius",
-                     "max_control_spacing"):
+                     "max_control_spacing", "lateral_rate"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating | np.integer)
                     and np.isfinite(value) and value > 0):
@@ -142,7 +151,7 @@ class TrajectoryParams:
                 and 0.0 <= self.band_fraction <= 1.0):
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
-        for name in ("lead_in_lengths", "lead_in_time"):
+        for name in ("lead_in_lengths", "lead_in_time", "band_reserve"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating | np.integer)
                     and np.isfinite(value) and value >= 0):
@@ -677,7 +686,13 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     reach = float(vs[-1] - s0)
     if reach <= 1e-6:
         raise TrajectoryError("the roadmap ends at or behind the vehicle: no curve to follow")
-    lines = _vertex_lines(roadmap, corridor, distinct, sl[1:], params.band_fraction)
+    lines = _vertex_lines(roadmap, corridor, distinct, sl[1:], params.band_fraction,
+                          params.band_reserve, params.lateral_rate)
+    # the control points stand at the bands' centres (the roadmap vertices, except where
+    # the lateral tube moved them)
+    moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
+    pts = pts.copy()
+    pts[moved] = lines[0][moved] + lines[3][moved, None] * lines[2][moved]
     lead = max(params.lead_in_lengths * rp.vehicle_length, params.lead_in_time * start_speed)
     lead = min(lead, 0.5 * reach)
     head_len = max(min(lead / 2.0, reach / 3.0), 1e-3)
@@ -725,13 +740,17 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
 
 
 def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.bool_],
-                  sl: FloatArray, band_fraction: float
+                  sl: FloatArray, band_fraction: float, band_reserve: float = 0.0,
+                  lateral_rate: float = np.inf
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Each roadmap vertex's sweep line and band: origin ``(m, 2)`` (lateral offset 0),
     tangent ``(m, 2)``, normal ``(m, 2)``, band centre ``(m,)`` [m] and half width ``(m,)`` [m].
 
-    The band is ``band_fraction`` of the vertex's free interval, centred on its midpoint
-    (the vertex). Without free intervals (a roadmap without its graph) the bands are empty.
+    The vertices' free intervals are first narrowed by :func:`lateral_tube`; the band is
+    centred on the narrowed interval's midpoint (the vertex itself where nothing narrows)
+    and spans ``band_fraction`` of it, but leaves at least ``band_reserve`` [m] on each
+    side (room for the footprint's turn away from the road's heading). Without free
+    intervals (a roadmap without its graph) the bands are empty and centred on the vertices.
     """
     s = sl[:, 0]
     h = corridor.heading_at(s)
@@ -742,10 +761,39 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
     if len(path) == len(distinct) and len(roadmap.graph_lo) and len(roadmap.graph_hi):
         lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
         hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
-        half = band_fraction * np.maximum(hi - lo, 0.0) / 2.0
+        lo, hi = lateral_tube(s, lo, hi, lateral_rate)
+        centre = (lo + hi) / 2.0
+        free = np.maximum(hi - lo, 0.0) / 2.0
+        half = np.clip(np.minimum(band_fraction * free, free - band_reserve), 0.0, None)
     else:
-        half = np.zeros(len(s))
-    return origin, tangent, normal, sl[:, 1], half
+        centre, half = sl[:, 1], np.zeros(len(s))
+    return origin, tangent, normal, centre, half
+
+
+def lateral_tube(s: ArrayLike, lo: ArrayLike, hi: ArrayLike, rate: float
+                 ) -> tuple[FloatArray, FloatArray]:
+    """Free intervals ``[lo, hi]`` [m] at stations ``s`` ``(m,)`` [m] narrowed to the lateral
+    offsets from which a path whose offset changes by at most ``rate`` per metre of station
+    reaches every interval before and after (a backward, then a forward pass).
+
+    Where the intervals jump faster than that (the roadmap steps across within a few sweep
+    lines), the tube tapers towards the jump over ``jump / rate`` metres, so that the
+    lateral move is taken over that distance instead of at the last line. A line whose
+    interval the rate cannot reach keeps its own interval (the passes restart there).
+    """
+    st = np.asarray(s, dtype=float)
+    a = np.asarray(lo, dtype=float).copy()
+    b = np.asarray(hi, dtype=float).copy()
+    reach = rate * np.abs(np.diff(st))
+    for order in (range(len(st) - 2, -1, -1), range(1, len(st))):
+        step = -1 if order.step == -1 else 1
+        for k in order:
+            j = k - step
+            r = reach[min(k, j)]
+            na, nb = max(a[k], a[j] - r), min(b[k], b[j] + r)
+            if na <= nb:
+                a[k], b[k] = na, nb
+    return a, b
 
 
 def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, normal: ArrayLike,
