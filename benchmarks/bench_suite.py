@@ -47,13 +47,14 @@ def main(argv: list[str]) -> None:
         wall = statistics.median(r["wall_time"] for r in rows)
         sumo = statistics.median(r["wall_sumo"] or 0.0 for r in rows)
         plan = statistics.median(r["wall_planner"] or 0.0 for r in rows)
+        loop = statistics.median(r.get("wall_loop") or 0.0 for r in rows)
         print(f"  {d:>8}: per run (median, 1 worker) process {proc:.2f} s, simulate() "
-              f"{wall:.2f} s = SUMO and loop {sumo:.2f} s + planner {plan:.2f} s")
+              f"{wall:.2f} s = SUMO {sumo:.2f} s + planner {plan:.2f} s + loop {loop:.2f} s")
     print("  per run:")
     for r in one.rows:
         print(f"    {r['case']:>22} {r['driver']:>8} {r['status']:>8}  wall "
               f"{(r['wall_time'] or 0):.2f} s  SUMO {(r['wall_sumo'] or 0):.2f} s  "
-              f"planner {(r['wall_planner'] or 0):.2f} s")
+              f"planner {(r['wall_planner'] or 0):.2f} s  loop {(r.get('wall_loop') or 0):.2f} s")
 
 
 if __name__ == "__main__":

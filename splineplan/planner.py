@@ -155,7 +155,7 @@ def cut_stations(corridor: Corridor, length: float, overlap: float
     grid[-1] = min(grid[-1], total)
     head = np.unwrap(corridor.heading_at(grid))
     right, left = corridor.bounds_at(grid)
-    win = max(int(round(overlap)), 1)
+    win = max(round(overlap), 1)
 
     def spread(a: FloatArray) -> FloatArray:
         # range of a over [grid[j] - overlap, grid[j]] for each j

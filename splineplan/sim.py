@@ -95,6 +95,26 @@ _RETRY_AFTER = 1.0
 _PATH_EXTENSION = 60.0
 #: Re-routes tried in one replan before giving up.
 _MAX_REROUTES = 5
+#: A moving vehicle whose centre is at least this far [m] to the side of the ego's centre
+#: (across the route) is *beside* the ego, not ahead in its path: level 2 and 3 plan around
+#: where it goes in the next :data:`SWEEP_TIME` (its swept footprint), so that the ego keeps
+#: a lateral separation from it; a vehicle within it is handled by speed (time gap).
+BESIDE_LATERAL = 1.0
+#: Horizon [s] of a beside vehicle's swept footprint (constant speed along the route).
+SWEEP_TIME = 2.0
+#: Stations [m] behind and ahead of the ego's centre within which vehicles count as beside.
+_BESIDE_BACK = 15.0
+_BESIDE_AHEAD = 40.0
+#: A swept footprint starts at least this far [m], and this many seconds at the ego's speed,
+#: ahead of the ego's front bumper.
+_SWEEP_CLIP = 3.0
+_SWEEP_CLIP_TIME = 1.0
+#: Prediction times [s] of the check for a beside vehicle coming near the planned path.
+_CONFLICT_TIMES = np.arange(0.0, 3.01, 0.5)
+#: Longitudinal slack [m] of that check.
+_CONFLICT_SLACK = 1.0
+#: At most one ``traffic`` replan per this many seconds.
+_TRAFFIC_REPLAN_EVERY = 0.5
 
 #: Who drives the ego: ``planner`` (splineplan, through ``moveToXY``), ``sumo`` (SUMO's
 #: default car-following and lane-change models, lane-based: SUMO started without
@@ -120,8 +140,9 @@ class Replan:
         Simulation time [s].
     reason
         ``start``, ``horizon`` (the window ran short), ``obstacles`` (new obstacles ahead),
-        ``deviation`` (SUMO put the ego off the plan), ``reroute`` (level 1 after level 2
-        found the road closed) or ``retry`` (after a failed plan).
+        ``deviation`` (SUMO put the ego off the plan), ``traffic`` (a moving vehicle beside
+        the ego comes near the planned path), ``reroute`` (level 1 after level 2 found the
+        road closed) or ``retry`` (after a failed plan).
     planning_time
         Wall time [s] of the planning (levels 1 to 3 as needed).
     station
@@ -234,6 +255,11 @@ def simulate(
     out.mkdir(parents=True, exist_ok=True)
     run = _Run(scenario, out, driver=driver, gui=gui, on_step=on_step,
                progress=_want_progress(progress))
+    with _run_log(out / "run.log"):
+        return _simulate(run, scenario, plot=plot)
+
+
+def _simulate(run: _Run, scenario: Scenario, *, plot: bool) -> SimResult:
     try:
         run.setup()
         run.loop()
@@ -339,8 +365,13 @@ class _Run:
         self.teleports = 0  # of any vehicle
         self.ego_teleports: list[float] = []
         self.check_seconds = 0.0  # wall time [s] of the loop's own safety checks
+        self.sumo_seconds = 0.0  # wall time [s] inside SUMO (start, steps, moves, reads)
+        self.plan_seconds = 0.0  # wall time [s] of the planning calls
         self.c: Any = None  # libsumo.constants
         self._obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]] = {}
+        self.lateral = 0.0  # the ego's lateral offset [m] on the route
+        self.traffic_after = 0.0  # no traffic replan before this time [s]
+        self.planned_moving: tuple[str, ...] = ()  # beside vehicles the plan went around
 
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> None:
@@ -415,7 +446,10 @@ class _Run:
                "--collision.action", "warn", "--collision.check-junctions", "true",
                "--time-to-teleport", "-1", *self._lateral_options(),
                "--fcd-output", str(self.out / "fcd.xml"),
-               "--log", str(self.out / "sumo.log"),
+               # everything SUMO says goes to sumo.log, nothing to the console: with
+               # --no-warnings, warnings reach only the error log (the same file)
+               "--log", str(self.out / "sumo.log"), "--error-log", str(self.out / "sumo.log"),
+               "--no-warnings", "true",
                "--no-step-log", "true", "--duration-log.disable", "true"]
         if sc.routes:
             cmd += ["-r", ",".join(str(p) for p in sc.routes)]
@@ -424,6 +458,7 @@ class _Run:
         if self.gui:
             cmd += ["--start", "--quit-on-end"]
         self.sumo = sumo_mod
+        t0 = time.perf_counter()
         try:
             sumo_mod.start(cmd)
         except Exception as err:
@@ -433,6 +468,7 @@ class _Run:
                 f"SUMO failed to start for scenario '{sc.name}': {_sumo_message(err)}"
                 + (f"; SUMO says: {log_text}" if log_text else "")) from err
         self.sumo_started = True
+        self.sumo_seconds += time.perf_counter() - t0
         self.polygons = self._read_polygons()
         self.road.add_junctions(self._junction_shapes())
 
@@ -542,6 +578,7 @@ class _Run:
 
     def _step(self) -> None:
         s = self.sumo
+        t0 = time.perf_counter()
         try:
             s.simulationStep()
         except Exception as err:
@@ -552,6 +589,7 @@ class _Run:
             raise SimulationError(f"SUMO failed at t={self.time:.1f} s: "
                                   f"{_sumo_message(err)}") from err
         self.time = float(s.simulation.getTime())
+        self.sumo_seconds += time.perf_counter() - t0
         for c in s.simulation.getCollisions():
             rec = {"time": self.time, "collider": c.collider, "victim": c.victim,
                    "type": c.type, "lane": c.lane, "pos": c.pos}
@@ -586,7 +624,9 @@ class _Run:
     def _read_others(self) -> None:
         """The vehicles around the ego, from the context subscription (one call)."""
         c = self.c
+        t0 = time.perf_counter()
         res = self.sumo.vehicle.getContextSubscriptionResults(self.ego)
+        self.sumo_seconds += time.perf_counter() - t0
         ids, vals = [], []
         for vid, v in (res or {}).items():
             if vid == self.ego:
@@ -633,6 +673,7 @@ class _Run:
         self.check_seconds += time.perf_counter() - t0
         sl = self._project(np.array([x, y]))
         self.station = float(sl[0])
+        self.lateral = float(sl[1])
         self.rows.append((self.time, x, y, h, self.v, self.station, float(sl[1]), lane,
                           float(fx), float(fy), pos_err, clear_obs, clear_veh, int(off_road),
                           self.limited))
@@ -788,6 +829,13 @@ class _Run:
             self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
                          obstacles=self._obstacles_ahead(ahead))
             return
+        if self.time >= self.traffic_after:
+            near = self._traffic_conflict()
+            if near is not None:
+                self.traffic_after = self.time + _TRAFFIC_REPLAN_EVERY
+                self._replan("traffic", f"vehicle '{near}' beside the ego comes near the "
+                                        "planned path", obstacles=self._obstacles_ahead(ahead))
+                return
         assert self.corridor is not None
         left = self.path_s[-1] - self.u
         if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
@@ -819,6 +867,7 @@ class _Run:
                 reason = "reroute"
                 detail = why
         elapsed = time.perf_counter() - t0
+        self.plan_seconds += elapsed
         station = self.station
         if ok:
             self.retry_at = None
@@ -836,7 +885,28 @@ class _Run:
         self._brake_before_blockage(msg)
 
     def _plan(self, obstacles: Obstacles) -> tuple[bool, Any]:
-        """Levels 2 and 3 on the window ahead. Returns (ok, error)."""
+        """Levels 2 and 3 on the window ahead. Returns (ok, error).
+
+        Moving vehicles beside the ego (:meth:`_moving_obstacles`) are planned around too
+        where that gives a trajectory that keeps the safety margin; otherwise the plan is
+        made among the stopped obstacles alone and the moving vehicles are left to the
+        time-gap speed control.
+        """
+        moving = self._moving_obstacles()
+        if len(moving):
+            ok, err = self._plan_among(obstacles, moving)
+            if ok:
+                self.planned_moving = moving.ids
+                return ok, err
+            log.debug("t=%.1f no plan around the traffic beside the ego (%s): planning "
+                      "among the stopped obstacles only", self.time, err)
+        self.planned_moving = ()
+        return self._plan_among(obstacles, None)
+
+    def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None
+                    ) -> tuple[bool, Any]:
+        """Levels 2 and 3 among ``obstacles`` (and ``moving``, strictly: any failure or a
+        trajectory short of the margin is a refusal, never a truncated plan)."""
         from splineplan.planner import plan_corridor
 
         sc, ego = self.sc, self.sc.ego
@@ -850,13 +920,16 @@ class _Run:
         if s1 - s0 < 2.0 * sc.roadmap.d + ego.length:
             s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, 0.0)
         final = s1 >= self.corridor.length - 1e-6
+        everything = obstacles if moving is None else obstacles + moving
         try:
             window = self.corridor.slice(s0, s1)
             roadmaps, traj = plan_corridor(
-                window, obstacles, self.pose[:2], float(self.pose[2]),
+                window, everything, self.pose[:2], float(self.pose[2]),
                 roadmap_params=sc.roadmap, params=sc.trajectory,
                 start_speed=float(self.v), end_speed=0.0 if final else None)
         except RoadBlockedError as err:
+            if moving is not None:
+                return False, err
             blocked = err
             if blocked.edge is None:
                 blocked = RoadBlockedError(str(err), station=err.station,
@@ -868,6 +941,8 @@ class _Run:
         bad = np.flatnonzero(np.asarray(traj.clearance_obstacles)
                              < sc.roadmap.safety_margin - 1e-6)
         usable = None
+        if len(bad) and moving is not None:
+            return False, TrajectoryError("trajectory comes too near the traffic beside")
         if len(bad):
             # level 3 reports a curve that comes closer than the margin: drive only the part
             # that keeps clear, stop before the rest, and replan on the way
@@ -880,8 +955,101 @@ class _Run:
             log.info("t=%.1f trajectory infeasible %.1f m ahead: driving %.1f m of it",
                      self.time, float(traj.s[bad[0]]), usable)
         self._take(traj, s1, usable=usable)
-        self.plans.append((self.time, roadmaps, traj, window, obstacles))
+        self.plans.append((self.time, roadmaps, traj, window, everything))
         return True, None
+
+    def _beside(self) -> tuple[np.ndarray, FloatArray]:
+        """Moving vehicles beside the ego: indices into ``self.others`` and their centres'
+        station and lateral offset ``(k, 2)`` on the route.
+
+        Beside: not stopped, driving the route's way (within 45 degrees), on the route's
+        road, between :data:`_BESIDE_BACK` behind and :data:`_BESIDE_AHEAD` ahead of the
+        ego's centre, and at least :data:`BESIDE_LATERAL` to its side.
+        """
+        none = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
+        ids, fronts, heads, lens, _, _, stopped = self.others
+        if not ids or self.corridor is None:
+            return none
+        centres = fronts - (lens / 2.0)[:, None] * np.column_stack((np.cos(heads),
+                                                                   np.sin(heads)))
+        # a cheap first cut in the ego's own frame, before projecting onto the route
+        x, y, h = (float(v) for v in self.pose)
+        dx, dy = centres[:, 0] - x, centres[:, 1] - y
+        lon = dx * math.cos(h) + dy * math.sin(h)
+        lat = np.abs(dy * math.cos(h) - dx * math.sin(h))
+        cand = np.flatnonzero(~stopped & (lon > -_BESIDE_BACK - 5.0)
+                              & (lon < _BESIDE_AHEAD + 5.0) & (lat > BESIDE_LATERAL - 0.5)
+                              & (lat < 10.0))
+        if not len(cand):
+            return none
+        c = self.corridor
+        sl = c.to_sl(centres[cand])
+        s_in = np.clip(sl[:, 0], 0.0, c.length)
+        right, left = c.bounds_at(s_in)
+        along = np.cos(heads[cand] - c.heading_at(s_in)) > math.cos(math.pi / 4.0)
+        keep = (along & (sl[:, 0] >= self.station - _BESIDE_BACK)
+                & (sl[:, 0] <= self.station + _BESIDE_AHEAD)
+                & (sl[:, 1] >= right - 0.5) & (sl[:, 1] <= left + 0.5)
+                & (np.abs(sl[:, 1] - self.lateral) >= BESIDE_LATERAL))
+        return cand[keep], sl[keep]
+
+    def _moving_obstacles(self) -> Obstacles:
+        """Swept footprints of the moving vehicles beside the ego (:meth:`_beside`).
+
+        Each is the band of the vehicle's width at its lateral offset on the route, from its
+        rear to where its front will be after :data:`SWEEP_TIME` at its speed, following the
+        road; it starts some way ahead of the ego's front bumper (:data:`_SWEEP_CLIP`; the
+        ego cannot leave the place it is in, and a plan that starts inside an obstacle
+        would be refused).
+        """
+        idx, sl = self._beside()
+        if not len(idx):
+            return Obstacles.empty()
+        assert self.corridor is not None
+        c, ego = self.corridor, self.sc.ego
+        ids, _, _, lens, wids, speeds, _ = self.others
+        clip = self.station + ego.length / 2.0 + max(_SWEEP_CLIP, self.v * _SWEEP_CLIP_TIME)
+        polys, names = [], []
+        for j, i in enumerate(idx):
+            s_c, l_c = float(sl[j, 0]), float(sl[j, 1])
+            s_lo = max(s_c - lens[i] / 2.0, clip)
+            s_hi = min(s_c + lens[i] / 2.0 + max(float(speeds[i]), 0.0) * SWEEP_TIME,
+                       c.length)
+            if s_hi - s_lo < 0.5:
+                continue
+            ss = np.linspace(s_lo, s_hi, max(math.ceil((s_hi - s_lo) / 2.0), 1) + 1)
+            half = wids[i] / 2.0
+            polys.append(np.vstack((c.to_xy(ss, l_c - half), c.to_xy(ss[::-1], l_c + half))))
+            names.append(f"moving:{ids[i]}")
+        return Obstacles.from_polygons(polys, names) if polys else Obstacles.empty()
+
+    def _traffic_conflict(self) -> str | None:
+        """The first moving vehicle beside the ego that, driving on at its speed and
+        heading, comes within the ego's width plus the safety margin of where the ego will
+        be along its plan in the next few seconds; ``None`` if none does."""
+        if self.traj is None:
+            return None
+        idx, _ = self._beside()
+        if not len(idx):
+            return None
+        ego, margin = self.sc.ego, self.sc.roadmap.safety_margin
+        ids, fronts, heads, lens, wids, speeds, _ = self.others
+        tau = _CONFLICT_TIMES
+        u = np.minimum(self.u + self.v * tau, self.path_s[-1])  # (m,)
+        ex = np.interp(u, self.path_s, self.path_xy[:, 0])
+        ey = np.interp(u, self.path_s, self.path_xy[:, 1])
+        eh = np.interp(u, self.path_s, self.path_heading)
+        dirs = np.column_stack((np.cos(heads[idx]), np.sin(heads[idx])))  # (k, 2)
+        centres = fronts[idx] - (lens[idx] / 2.0)[:, None] * dirs
+        ox = centres[:, 0, None] + speeds[idx, None] * tau[None] * dirs[:, 0, None]  # (k, m)
+        oy = centres[:, 1, None] + speeds[idx, None] * tau[None] * dirs[:, 1, None]
+        dx, dy = ox - ex[None], oy - ey[None]
+        lon = dx * np.cos(eh)[None] + dy * np.sin(eh)[None]
+        lat = -dx * np.sin(eh)[None] + dy * np.cos(eh)[None]
+        hit = ((np.abs(lon) < (ego.length + lens[idx, None]) / 2.0 + _CONFLICT_SLACK)
+               & (np.abs(lat) < (ego.width + wids[idx, None]) / 2.0 + margin))
+        rows = np.flatnonzero(hit.any(axis=1))
+        return ids[idx[rows[0]]] if len(rows) else None
 
     def _take(self, traj: Any, window_end: float, *, usable: float | None = None) -> None:
         s = np.asarray(traj.s, dtype=float)
@@ -1003,7 +1171,9 @@ class _Run:
         assert self.corridor is not None
         edge = self.corridor.edge_at(self.station) or ""
         lane = _lane_index(self.last_lane)
+        t0 = time.perf_counter()
         s.vehicle.moveToXY(self.ego, edge, lane, fx, fy, angle, KEEP_ROUTE)
+        self.sumo_seconds += time.perf_counter() - t0
 
     def _gap_speed(self) -> tuple[float, int]:
         """Speed cap [m/s] to keep the time gap to whatever is in the path, and red lights."""
@@ -1069,7 +1239,9 @@ class _Run:
 
     def finish(self, *, plot: bool) -> SimResult:
         if self.sumo is not None and self.sumo_started:
+            t0 = time.perf_counter()
             _safe_close(self.sumo)
+            self.sumo_seconds += time.perf_counter() - t0
             self.sumo_started = False
         self.wall_time = time.perf_counter() - self.wall_start
         driven = self._driven()
@@ -1157,7 +1329,14 @@ class _Run:
             # option is changed; a stuck SUMO driver shows as status "timeout" instead
             "teleports": self.teleports,
             "ego_teleports": len(self.ego_teleports),
+            # wall time [s] of the run: inside SUMO (start, steps, moveToXY, subscription
+            # reads, close), in the planner (levels 1 to 3 at each replan) and in the loop
+            # itself (the rest: reading the network, observation, safety checks, speed
+            # control)
             "wall_time": self.wall_time,
+            "wall_time_sumo": self.sumo_seconds,
+            "wall_time_planner": self.plan_seconds,
+            "wall_time_loop": max(self.wall_time - self.sumo_seconds - self.plan_seconds, 0.0),
             "safety_check_time": self.check_seconds,
         }
 
@@ -1317,6 +1496,25 @@ def _tail(path: Path, n: int = 3) -> str:
     except OSError:
         return ""
     return " | ".join(lines[-n:])
+
+
+@contextlib.contextmanager
+def _run_log(path: Path) -> Any:
+    """Send the package's log records (warnings and up) to ``path`` while a run lasts.
+
+    With a handler on the package's logger, Python's last-resort handler no longer prints
+    them on the console; records still propagate to any handlers the application set up.
+    """
+    handler = logging.FileHandler(path, mode="w", delay=True)
+    handler.setLevel(logging.WARNING)
+    handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    pkg = logging.getLogger("splineplan")
+    pkg.addHandler(handler)
+    try:
+        yield
+    finally:
+        pkg.removeHandler(handler)
+        handler.close()
 
 
 def _want_progress(progress: bool | None) -> bool:

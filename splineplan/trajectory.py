@@ -114,7 +114,10 @@ class TrajectoryParams:
         Largest lateral change [m per m of station] that the control points' tube allows
         (:func:`lateral_tube`): where the roadmap steps sideways faster (a width step at a
         junction entry, a lane change between parked cars), the step is spread over
-        ``step / lateral_rate`` metres ahead of it.
+        ``step / lateral_rate`` metres ahead of it. 0 (the default) leaves the roadmap's
+        intervals as they are: 0.15 removes the corner cut at width steps of empty
+        junction entries, but among parked cars it moves control points into places where
+        the first curve is not clear, so it is off until that is resolved.
     band_reserve
         Room [m] that each band leaves to its free interval's ends on each side.
     """
@@ -133,7 +136,7 @@ class TrajectoryParams:
     repair_rounds: int = 6
     lead_in_lengths: float = 2.0
     lead_in_time: float = 1.5
-    lateral_rate: float = 0.15
+    lateral_rate: float = 0.0
     band_reserve: float = 0.15
 
     def __post_init__(self) -> None:
@@ -141,7 +144,7 @@ class TrajectoryParams:
             raise ParameterError(f"TrajectoryParams.degree must be an integer in 2..5, "
                                  f"got {self.degree!r}")
         for name in ("mu", "g", "s_max", "a_max", "b_max", "sample_spacing", "min_turn_radius",
-                     "max_control_spacing", "lateral_rate"):
+                     "max_control_spacing"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating | np.integer)
                     and np.isfinite(value) and value > 0):
@@ -151,7 +154,7 @@ class TrajectoryParams:
                 and 0.0 <= self.band_fraction <= 1.0):
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
-        for name in ("lead_in_lengths", "lead_in_time", "band_reserve"):
+        for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "lateral_rate"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating | np.integer)
                     and np.isfinite(value) and value >= 0):
@@ -746,10 +749,11 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
     """Each roadmap vertex's sweep line and band: origin ``(m, 2)`` (lateral offset 0),
     tangent ``(m, 2)``, normal ``(m, 2)``, band centre ``(m,)`` [m] and half width ``(m,)`` [m].
 
-    The vertices' free intervals are first narrowed by :func:`lateral_tube`; the band is
-    centred on the narrowed interval's midpoint (the vertex itself where nothing narrows)
-    and spans ``band_fraction`` of it, but leaves at least ``band_reserve`` [m] on each
-    side (room for the footprint's turn away from the road's heading). Without free
+    The vertices' free intervals are first narrowed by :func:`lateral_tube`; each vertex
+    moves into its narrowed interval (and ``band_reserve`` [m] off its ends, where it is
+    wide enough), which is where the band is centred; the band spans ``band_fraction`` of
+    the free interval, within the narrowed interval less ``band_reserve`` [m] on each side
+    (room for the footprint's turn away from the road's heading). Without free
     intervals (a roadmap without its graph) the bands are empty and centred on the vertices.
     """
     s = sl[:, 0]
@@ -761,10 +765,13 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
     if len(path) == len(distinct) and len(roadmap.graph_lo) and len(roadmap.graph_hi):
         lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
         hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
-        lo, hi = lateral_tube(s, lo, hi, lateral_rate)
-        centre = (lo + hi) / 2.0
-        free = np.maximum(hi - lo, 0.0) / 2.0
-        half = np.clip(np.minimum(band_fraction * free, free - band_reserve), 0.0, None)
+        tlo, thi = lateral_tube(s, lo, hi, lateral_rate)
+        # the vertex, moved into the tube (and off its ends by the reserve where it can)
+        q = np.minimum(band_reserve, (thi - tlo) / 2.0)
+        centre = np.clip(sl[:, 1], tlo + q, thi - q)
+        room = np.minimum(centre - tlo, thi - centre)
+        half = np.clip(np.minimum(band_fraction * np.maximum(hi - lo, 0.0) / 2.0,
+                                  room - band_reserve), 0.0, None)
     else:
         centre, half = sl[:, 1], np.zeros(len(s))
     return origin, tangent, normal, centre, half
@@ -778,22 +785,30 @@ def lateral_tube(s: ArrayLike, lo: ArrayLike, hi: ArrayLike, rate: float
 
     Where the intervals jump faster than that (the roadmap steps across within a few sweep
     lines), the tube tapers towards the jump over ``jump / rate`` metres, so that the
-    lateral move is taken over that distance instead of at the last line. A line whose
-    interval the rate cannot reach keeps its own interval (the passes restart there).
+    lateral move is taken over that distance instead of at the last line. Where no path
+    at that rate exists (a slalom tighter than it), the rate is doubled, up to three times;
+    then, or with ``rate <= 0``, the intervals are returned unchanged.
     """
     st = np.asarray(s, dtype=float)
-    a = np.asarray(lo, dtype=float).copy()
-    b = np.asarray(hi, dtype=float).copy()
-    reach = rate * np.abs(np.diff(st))
-    for order in (range(len(st) - 2, -1, -1), range(1, len(st))):
-        step = -1 if order.step == -1 else 1
-        for k in order:
-            j = k - step
-            r = reach[min(k, j)]
-            na, nb = max(a[k], a[j] - r), min(b[k], b[j] + r)
-            if na <= nb:
-                a[k], b[k] = na, nb
-    return a, b
+    lo0, hi0 = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    if not (np.isfinite(rate) and rate > 0):
+        return lo0.copy(), hi0.copy()
+    ds = np.abs(np.diff(st))
+    for attempt in range(4):
+        a, b = lo0.tolist(), hi0.tolist()
+        reach = (rate * 2.0**attempt * ds).tolist()
+        ok = True
+        for k in range(len(st) - 2, -1, -1):  # backward: can reach what follows
+            a[k] = max(a[k], a[k + 1] - reach[k])
+            b[k] = min(b[k], b[k + 1] + reach[k])
+            ok = ok and a[k] <= b[k]
+        for k in range(1, len(st)):  # forward: can be reached from what precedes
+            a[k] = max(a[k], a[k - 1] - reach[k - 1])
+            b[k] = min(b[k], b[k - 1] + reach[k - 1])
+            ok = ok and a[k] <= b[k]
+        if ok:
+            return np.asarray(a), np.asarray(b)
+    return lo0.copy(), hi0.copy()
 
 
 def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, normal: ArrayLike,
