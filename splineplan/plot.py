@@ -454,7 +454,7 @@ def plot_run_folder(
                 label="driven path")
         ax.figure.colorbar(lc, ax=ax, fraction=0.03, pad=0.02).set_label("speed [m/s]")
         ax.autoscale_view()
-    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.legend(loc="best", fontsize="small")
