@@ -56,6 +56,7 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
     rng = random.Random(seed)
     usable = [e for e in net.edge_ids if net.allows(e, "passenger")]
     rows: list[tuple[float, int, float, float, float, float]] = []
+    feasible: list[bool] = []
     failures: list[str] = []
     tries = 0
     while len(rows) < n_routes and tries < 200 * n_routes:
@@ -79,17 +80,20 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
             continue
         best = min(times)
         rows.append((route.length, len(obstacles), *best))
+        feasible.append(bool(p.trajectory.feasible))
     if not rows:
         print(f"{path.name}: no route planned ({len(failures)} failures)")
         return {}
     arr = np.array(rows)
     med = {name: 1e3 * float(np.median(arr[:, i]))
            for i, name in enumerate(("total", "level1", "level2", "level3"), start=2)}
+    med["feasible"] = sum(feasible) / len(feasible)
     print(f"{path.name}: {len(rows)} routes of {arr[:, 0].min():.0f}-{arr[:, 0].max():.0f} m, "
           f"{int(arr[:, 1].min())}-{int(arr[:, 1].max())} parked cars; medians: "
           f"total {med['total']:.1f} ms (level 1 {med['level1']:.2f}, level 2 "
           f"{med['level2']:.1f}, level 3 {med['level3']:.1f}); planning failed on "
-          f"{len(failures)} of {len(rows) + len(failures)} routes")
+          f"{len(failures)} of {len(rows) + len(failures)} routes; trajectory feasible on "
+          f"{sum(feasible)} of {len(feasible)}")
     for f in failures[:5]:
         print(f"  failed: {f}")
     per_km = 1e3 * arr[:, 2] / (arr[:, 0] / 1e3)

@@ -36,6 +36,7 @@ midway writes all it has recorded, says why in ``metrics.json`` and raises
 
 from __future__ import annotations
 
+import bisect
 import contextlib
 import csv
 import json
@@ -63,13 +64,13 @@ from splineplan.errors import (
     TrajectoryError,
     VehicleClassError,
 )
-from splineplan.geometry import FloatArray, heading_from_sumo_angle, sumo_angle_from_heading
+from splineplan.geometry import FloatArray, heading_from_sumo_angle
 from splineplan.metrics import (
     CURVATURE_SPAN,
-    box_distances,
     dynamics,
     finite_or_none,
     footprints,
+    rectangle_distances,
     summary_stats,
 )
 from splineplan.obstacles import Obstacles
@@ -372,6 +373,10 @@ class _Run:
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.traffic_after = 0.0  # no traffic replan before this time [s]
         self.planned_moving: tuple[str, ...] = ()  # beside vehicles the plan went around
+        self.others = _NO_OTHERS
+        self._beside_at: tuple[float, float] | None = None
+        self._beside_was: tuple[np.ndarray, FloatArray] = (np.zeros(0, dtype=np.int64),
+                                                           np.zeros((0, 2)))
 
     # -- setup ----------------------------------------------------------------------------
     def setup(self) -> None:
@@ -414,6 +419,12 @@ class _Run:
         ego = self.sc.ego
         self.corridor = corridor
         self.route_edges = tuple(edges)
+        ref = np.asarray(corridor.reference, dtype=float)
+        self._ref_a = ref[:-1]
+        self._ref_ab = np.diff(ref, axis=0)
+        seg_len = np.hypot(self._ref_ab[:, 0], self._ref_ab[:, 1])
+        self._ref_len = np.where(seg_len > 0, seg_len, 1.0)  # zero-length: t = 0, l = 0
+        self._ref_heading = np.arctan2(self._ref_ab[:, 1], self._ref_ab[:, 0])
         self._obs_cache = {}
         i = len(edges) - 1
         goal_len = self.net.length_of(ego.goal_edge)
@@ -622,34 +633,33 @@ class _Run:
 
     # -- observation --------------------------------------------------------------------------
     def _read_others(self) -> None:
-        """The vehicles around the ego, from the context subscription (one call)."""
+        """The vehicles around the ego, from the context subscription (one call), as
+        arrays (:class:`_Others`)."""
         c = self.c
         t0 = time.perf_counter()
         res = self.sumo.vehicle.getContextSubscriptionResults(self.ego)
         self.sumo_seconds += time.perf_counter() - t0
-        ids, vals = [], []
-        for vid, v in (res or {}).items():
-            if vid == self.ego:
-                continue
-            p = v[c.VAR_POSITION]
-            ids.append(vid)
-            vals.append((p[0], p[1], v[c.VAR_ANGLE], v[c.VAR_LENGTH], v[c.VAR_WIDTH],
-                         v[c.VAR_SPEED], v[c.VAR_STOPSTATE]))
-        if not ids:
+        if res:
+            res.pop(self.ego, None)
+        if not res:
             self.others = _NO_OTHERS
             return
-        a = np.array(vals, dtype=float)
-        speeds = a[:, 5]
-        stopped = ((a[:, 6].astype(np.int64) & 3) > 0) & (speeds < self.sc.sim.stopped_speed)
-        self.others = (ids, a[:, :2], np.radians(90.0 - a[:, 2]), a[:, 3], a[:, 4], speeds,
-                       stopped)
+        pos, ang, spd = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED
+        lng, wid, stop = c.VAR_LENGTH, c.VAR_WIDTH, c.VAR_STOPSTATE
+        a = np.array([(*v[pos], v[ang], v[lng], v[wid], v[spd], v[stop])
+                      for v in res.values()], dtype=float)
+        self.others = _Others(list(res), a, self.sc.sim.stopped_speed)
 
     def _observe(self) -> None:
         """Read the world after a step; check where SUMO put the ego; safety checks."""
         s, ego = self.sumo, self.sc.ego
         c = self.c
         st = s.vehicle.getSubscriptionResults(self.ego)
-        if not st or self.ego not in s.vehicle.getIDList():
+        try:  # subscription results outlive a removal until the next step
+            s.vehicle.getLaneID(self.ego)
+        except Exception:
+            st = None
+        if not st:
             raise SimulationError(f"ego vehicle '{self.ego}' left the simulation at "
                                   f"t={self.time:.1f} s (removed by someone else)")
         fx, fy = st[c.VAR_POSITION]
@@ -686,69 +696,83 @@ class _Run:
 
     def _safety(self, x: float, y: float, h: float) -> tuple[float, float, bool]:
         """Clearance [m] to stopped and to moving vehicles (and obstacle polygons), collisions
-        (recorded), and whether the ego's footprint leaves the road."""
-        ego = self.sc.ego
-        ids, fronts, heads, lens, wids, _, stopped = self.others
+        (recorded), and whether the ego's footprint leaves the road.
+
+        Every vehicle around the ego is checked: a lower bound of its distance from its
+        bounding circle (one array pass), the exact footprint distance where that comes
+        within 2 m.
+        """
+        ego, o = self.sc.ego, self.others
         ego_box = _box(x, y, h, ego.length, ego.width)
         clear_obs = clear_veh = math.inf
-        if ids:
-            # bounding circles first: the exact distance only where they come within 2 m
-            r_ego = math.hypot(ego.length, ego.width) / 2.0
-            cx = fronts[:, 0] - lens / 2.0 * np.cos(heads) - x
-            cy = fronts[:, 1] - lens / 2.0 * np.sin(heads) - y
-            dist = np.hypot(cx, cy) - r_ego - np.hypot(lens, wids) / 2.0
+        r_ego = 0.5 * math.hypot(ego.length, ego.width)
+        if o.n:
+            dist = np.hypot(o.cx - x, o.cy - y) - (o.radius + r_ego)
             close = np.flatnonzero(dist < 2.0)
             if len(close):
-                dist[close] = box_distances(ego_box, footprints(
-                    fronts[close], heads[close], lens[close], wids[close]))
+                dist[close] = rectangle_distances(
+                    (x, y), h, ego.length, ego.width, np.column_stack((o.cx[close],
+                                                                     o.cy[close])),
+                    o.head[close], o.length[close], o.width[close])
                 for j in close[dist[close] <= 0.0]:
-                    self.collisions.append({"time": self.time, "other": ids[j],
-                                            "other_stopped": bool(stopped[j]),
+                    self.collisions.append({"time": self.time, "other": o.ids[j],
+                                            "other_stopped": bool(o.stopped[j]),
                                             "source": "footprint"})
-            if stopped.any():
-                clear_obs = float(dist[stopped].min())
-            if not stopped.all():
-                clear_veh = float(dist[~stopped].min())
+            if o.n_stopped:
+                clear_obs = float(dist[o.stopped].min())
+            if o.n_stopped < o.n:
+                clear_veh = float(dist[~o.stopped].min() if o.n_stopped else dist.min())
         if len(self.polygons):
             near = self.polygons.near(ego_box, self.sc.sim.lookahead)
             if len(near):
                 clear_obs = min(clear_obs, float(near.distance(ego_box).min()))
-        probe = np.vstack((ego_box, (ego_box + np.roll(ego_box, -1, axis=0)) / 2.0))
-        off_road = not bool(self.road.contains(probe).all())
+        probe = np.concatenate((ego_box, 0.5 * (ego_box + ego_box[[1, 2, 3, 0]])))
+        off_road = not self.road.contains_all(probe, centre=(x, y), radius=r_ego)
         return clear_obs, clear_veh, off_road
 
-    def _project(self, xy: FloatArray) -> FloatArray:
-        """Station and lateral offset ``(2,)`` of a point near the last known station.
+    def _project(self, xy: FloatArray, *, back: float = 10.0, ahead: float = 20.0
+                 ) -> FloatArray:
+        """Stations and lateral offsets ``(k, 2)`` of points ``(k, 2)`` (or ``(2,)`` of one
+        point ``(2,)``) near the ego.
 
-        A local search along the corridor's reference line (the ego moves a few decimetres a
-        step); a full projection where the local one ends at its window's edge.
+        A local search over the corridor's reference segments from ``back`` [m] behind to
+        ``ahead`` [m] ahead of the ego's last station (the ego moves a few decimetres a
+        step); a full projection (:meth:`Corridor.to_sl`) for points whose nearest segment
+        is at the window's edge.
         """
         c = self.corridor
         assert c is not None
-        ref, s = c.reference, c.s
-        i0 = int(np.searchsorted(s, self.station))
-        lo, hi = max(i0 - 20, 0), min(i0 + 40, len(ref) - 1)
-        seg_a, seg_b = ref[lo:hi], ref[lo + 1:hi + 1]
-        if len(seg_a) == 0:
-            return np.asarray(c.to_sl(xy[None])[0])
-        ab = seg_b - seg_a
-        ln2 = np.einsum("ij,ij->i", ab, ab)
-        tt = np.clip(np.einsum("ij,ij->i", xy - seg_a, ab) / np.where(ln2 > 0, ln2, 1.0), 0, 1)
-        d = np.hypot(*(seg_a + tt[:, None] * ab - xy).T)
-        k = int(np.argmin(d))
-        if (k == 0 and lo > 0) or (k == len(seg_a) - 1 and hi < len(ref) - 1):
-            return np.asarray(c.to_sl(xy[None])[0])
-        j = lo + k
-        seg_len = float(np.sqrt(ln2[k]))
-        along = float(tt[k]) * seg_len
-        cross = float(ab[k, 0] * (xy[1] - seg_a[k, 1]) - ab[k, 1] * (xy[0] - seg_a[k, 0]))
-        lat = cross / seg_len if seg_len > 0 else 0.0
-        return np.array([s[j] + along, lat])
+        pts = np.asarray(xy, dtype=float)
+        one = pts.ndim == 1
+        pts = pts.reshape(-1, 2)
+        s = c.s
+        nseg = len(s) - 1
+        lo = max(int(np.searchsorted(s, self.station - back)) - 1, 0)
+        hi = min(int(np.searchsorted(s, self.station + ahead)) + 1, nseg)
+        if hi <= lo:
+            out = np.asarray(c.to_sl(pts))
+            return out[0] if one else out
+        a, ab, seg_len = self._ref_a[lo:hi], self._ref_ab[lo:hi], self._ref_len[lo:hi]
+        dx = pts[:, 0, None] - a[:, 0]  # (k, n)
+        dy = pts[:, 1, None] - a[:, 1]
+        t = np.minimum(np.maximum((dx * ab[:, 0] + dy * ab[:, 1]) / (seg_len * seg_len), 0.0),
+                       1.0)
+        ex = dx - t * ab[:, 0]
+        ey = dy - t * ab[:, 1]
+        k = np.argmin(ex * ex + ey * ey, axis=1)
+        r = np.arange(len(pts))
+        ln = seg_len[k]
+        out = np.column_stack((s[lo + k] + t[r, k] * ln,
+                               (ab[k, 0] * dy[r, k] - ab[k, 1] * dx[r, k]) / ln))
+        edge = ((k == 0) & (lo > 0)) | ((k == hi - lo - 1) & (hi < nseg))
+        if edge.any():
+            out[edge] = c.to_sl(pts[edge])
+        return out[0] if one else out
 
     limited = 0
     deviation = 0.0
     station = 0.0
-    others: tuple[Any, ...] = ()
+    others: _Others
 
     # -- obstacles ahead ----------------------------------------------------------------------
     def _ahead(self) -> tuple[np.ndarray, np.ndarray]:
@@ -758,24 +782,25 @@ class _Run:
         Where an obstacle lies on the route is computed once per obstacle and position (a
         stopped vehicle does not move) and route.
         """
-        ids, fronts, heads, lens, wids, _, stopped = self.others
+        o = self.others
         sim, ego = self.sc.sim, self.sc.ego
         lo = self.station - ego.length - 5.0
         assert self.corridor is not None
         hi = min(self.station + sim.lookahead, self.corridor.length) + 5.0
-        veh = np.flatnonzero(stopped) if ids else np.zeros(0, dtype=np.int64)
+        veh = np.flatnonzero(o.stopped) if o.n_stopped else ()
         keep_v = []
         for i in veh:
-            key = (ids[i], round(float(fronts[i, 0]), 1), round(float(fronts[i, 1]), 1))
+            fx, fy = o.front[i]
+            key = (o.ids[i], round(float(fx), 1), round(float(fy), 1))
             where = self._obs_cache.get(key)
             if where is None:
-                box = footprints(fronts[i:i + 1], heads[i:i + 1], lens[i:i + 1],
-                                 wids[i:i + 1])[0]
+                box = footprints(o.front[i:i + 1], o.head[i:i + 1], o.length[i:i + 1],
+                                 o.width[i:i + 1])[0]
                 where = self._on_route(box)
                 self._obs_cache[key] = where
             if where[2] and where[1] >= lo and where[0] <= hi:
                 keep_v.append(i)
-        keep_p = []
+        keep_p: list[int] = []
         for j in range(len(self.polygons)):
             key = (f"polygon:{j}", 0.0, 0.0)
             where = self._obs_cache.get(key)
@@ -796,18 +821,18 @@ class _Run:
         return float(sl[:, 0].min()), float(sl[:, 0].max()), lateral
 
     def _ahead_ids(self, veh: np.ndarray, poly: np.ndarray) -> set[str]:
-        ids = self.others[0]
+        ids = self.others.ids
         return {ids[i] for i in veh} | {self.polygons.ids[j] for j in poly}
 
     def _obstacles_ahead(self, ahead: tuple[np.ndarray, np.ndarray] | None = None
                          ) -> Obstacles:
         """Stopped vehicles and obstacle polygons near the route within the look-ahead."""
         veh, poly = self._ahead() if ahead is None else ahead
-        ids, fronts, heads, lens, wids, _, _ = self.others
+        o = self.others
         obs = Obstacles.empty()
         if len(veh):
-            obs = Obstacles.from_boxes(fronts[veh], heads[veh], lens[veh], wids[veh],
-                                       reference="front", ids=[ids[i] for i in veh])
+            obs = Obstacles.from_boxes(o.front[veh], o.head[veh], o.length[veh], o.width[veh],
+                                       reference="front", ids=[o.ids[i] for i in veh])
         if len(poly):
             obs = obs + self.polygons.subset(poly)
         return obs
@@ -966,27 +991,36 @@ class _Run:
         road, between :data:`_BESIDE_BACK` behind and :data:`_BESIDE_AHEAD` ahead of the
         ego's centre, and at least :data:`BESIDE_LATERAL` to its side.
         """
-        none = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
-        ids, fronts, heads, lens, _, _, stopped = self.others
-        if not ids or self.corridor is None:
-            return none
-        centres = fronts - (lens / 2.0)[:, None] * np.column_stack((np.cos(heads),
-                                                                   np.sin(heads)))
+        o = self.others
+        if not o.n or self.corridor is None:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+        if self._beside_at == (self.time, self.station):
+            return self._beside_was
+        self._beside_at = (self.time, self.station)
+        self._beside_was = self._beside_now()
+        return self._beside_was
+
+    def _beside_now(self) -> tuple[np.ndarray, FloatArray]:
+        o = self.others
+        assert self.corridor is not None
         # a cheap first cut in the ego's own frame, before projecting onto the route
         x, y, h = (float(v) for v in self.pose)
-        dx, dy = centres[:, 0] - x, centres[:, 1] - y
-        lon = dx * math.cos(h) + dy * math.sin(h)
-        lat = np.abs(dy * math.cos(h) - dx * math.sin(h))
-        cand = np.flatnonzero(~stopped & (lon > -_BESIDE_BACK - 5.0)
+        ch, sh = math.cos(h), math.sin(h)
+        dx, dy = o.cx - x, o.cy - y
+        lon = dx * ch + dy * sh
+        lat = np.abs(dy * ch - dx * sh)
+        cand = np.flatnonzero(~o.stopped & (lon > -_BESIDE_BACK - 5.0)
                               & (lon < _BESIDE_AHEAD + 5.0) & (lat > BESIDE_LATERAL - 0.5)
                               & (lat < 10.0))
         if not len(cand):
-            return none
+            return cand, np.zeros((0, 2))
         c = self.corridor
-        sl = c.to_sl(centres[cand])
-        s_in = np.clip(sl[:, 0], 0.0, c.length)
+        sl = self._project(np.column_stack((o.cx[cand], o.cy[cand])),
+                           back=_BESIDE_BACK + 15.0, ahead=_BESIDE_AHEAD + 15.0)
+        s_in = np.minimum(np.maximum(sl[:, 0], 0.0), c.length)
         right, left = c.bounds_at(s_in)
-        along = np.cos(heads[cand] - c.heading_at(s_in)) > math.cos(math.pi / 4.0)
+        seg = np.minimum(np.searchsorted(c.s, s_in, side="right") - 1, len(c.s) - 2)
+        along = np.cos(o.head[cand] - self._ref_heading[seg]) > math.cos(math.pi / 4.0)
         keep = (along & (sl[:, 0] >= self.station - _BESIDE_BACK)
                 & (sl[:, 0] <= self.station + _BESIDE_AHEAD)
                 & (sl[:, 1] >= right - 0.5) & (sl[:, 1] <= left + 0.5)
@@ -1007,7 +1041,8 @@ class _Run:
             return Obstacles.empty()
         assert self.corridor is not None
         c, ego = self.corridor, self.sc.ego
-        ids, _, _, lens, wids, speeds, _ = self.others
+        o = self.others
+        ids, lens, wids, speeds = o.ids, o.length, o.width, o.speed
         clip = self.station + ego.length / 2.0 + max(_SWEEP_CLIP, self.v * _SWEEP_CLIP_TIME)
         polys, names = [], []
         for j, i in enumerate(idx):
@@ -1033,23 +1068,24 @@ class _Run:
         if not len(idx):
             return None
         ego, margin = self.sc.ego, self.sc.roadmap.safety_margin
-        ids, fronts, heads, lens, wids, speeds, _ = self.others
+        o = self.others
+        lens, wids, speeds = o.length, o.width, o.speed
         tau = _CONFLICT_TIMES
         u = np.minimum(self.u + self.v * tau, self.path_s[-1])  # (m,)
         ex = np.interp(u, self.path_s, self.path_xy[:, 0])
         ey = np.interp(u, self.path_s, self.path_xy[:, 1])
         eh = np.interp(u, self.path_s, self.path_heading)
-        dirs = np.column_stack((np.cos(heads[idx]), np.sin(heads[idx])))  # (k, 2)
-        centres = fronts[idx] - (lens[idx] / 2.0)[:, None] * dirs
-        ox = centres[:, 0, None] + speeds[idx, None] * tau[None] * dirs[:, 0, None]  # (k, m)
-        oy = centres[:, 1, None] + speeds[idx, None] * tau[None] * dirs[:, 1, None]
-        dx, dy = ox - ex[None], oy - ey[None]
-        lon = dx * np.cos(eh)[None] + dy * np.sin(eh)[None]
-        lat = -dx * np.sin(eh)[None] + dy * np.cos(eh)[None]
+        travel = speeds[idx, None] * tau[None]  # (k, m)
+        ox = o.cx[idx, None] + travel * o.cos[idx, None]
+        oy = o.cy[idx, None] + travel * o.sin[idx, None]
+        dx, dy = ox - ex, oy - ey
+        ce, se = np.cos(eh), np.sin(eh)
+        lon = dx * ce + dy * se
+        lat = dy * ce - dx * se
         hit = ((np.abs(lon) < (ego.length + lens[idx, None]) / 2.0 + _CONFLICT_SLACK)
                & (np.abs(lat) < (ego.width + wids[idx, None]) / 2.0 + margin))
         rows = np.flatnonzero(hit.any(axis=1))
-        return ids[idx[rows[0]]] if len(rows) else None
+        return o.ids[idx[rows[0]]] if len(rows) else None
 
     def _take(self, traj: Any, window_end: float, *, usable: float | None = None) -> None:
         s = np.asarray(traj.s, dtype=float)
@@ -1073,7 +1109,14 @@ class _Run:
         self.ext_heading = np.full(len(ext), h_end)
         from scipy.spatial import cKDTree
 
-        self.path_tree = cKDTree(np.concatenate((self.path_xy, self.ext_xy)))
+        # the path and its straight extension, for the time-gap check
+        self.full_xy = np.concatenate((self.path_xy, self.ext_xy))
+        self.full_s = np.concatenate((self.path_s, self.ext_s))
+        self.full_heading = np.concatenate((self.path_heading, self.ext_heading))
+        self.path_tree = cKDTree(self.full_xy)
+        # plain lists for the per-step interpolation along the path
+        self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
+                    self.path_heading.tolist(), (self.path_speed**2).tolist())
         self.traj = traj
         self.u = 0.0
         # the trajectory starts at the ego's centre: keep u where the ego is
@@ -1138,7 +1181,8 @@ class _Run:
         dt = self.dt
         # speed squared is linear in station under constant acceleration: interpolate it
         u_next = self.u + self.v * dt + 0.5 * tp.a_max * dt * dt
-        v_plan = math.sqrt(float(np.interp(u_next, self.path_s, self.path_speed**2)))
+        ps, px, py, ph, pv2 = self._pl
+        v_plan = math.sqrt(max(_interp(u_next, ps, pv2), 0.0))
         v_cap, limited = self._gap_speed()
         if self.stop_at is not None:
             v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (self.stop_at - self.u), 0.0)))
@@ -1155,9 +1199,10 @@ class _Run:
             v_new = 0.0
         self.u, self.v = u, v_new
         self.limited = limited
-        x = float(np.interp(u, self.path_s, self.path_xy[:, 0]))
-        y = float(np.interp(u, self.path_s, self.path_xy[:, 1]))
-        h = float(np.interp(u, self.path_s, self.path_heading))
+        j, f = _locate(u, ps)
+        x = px[j] + f * (px[j + 1] - px[j])
+        y = py[j] + f * (py[j + 1] - py[j])
+        h = ph[j] + f * (ph[j + 1] - ph[j])
         self.pose = np.array([x, y, h])
         del ego
         self._move()
@@ -1167,7 +1212,7 @@ class _Run:
         x, y, h = self.pose
         fx = x + ego.length / 2.0 * math.cos(h)
         fy = y + ego.length / 2.0 * math.sin(h)
-        angle = float(sumo_angle_from_heading(h))
+        angle = (90.0 - math.degrees(h)) % 360.0  # geometry.sumo_angle_from_heading
         assert self.corridor is not None
         edge = self.corridor.edge_at(self.station) or ""
         lane = _lane_index(self.last_lane)
@@ -1176,44 +1221,54 @@ class _Run:
         self.sumo_seconds += time.perf_counter() - t0
 
     def _gap_speed(self) -> tuple[float, int]:
-        """Speed cap [m/s] to keep the time gap to whatever is in the path, and red lights."""
+        """Speed cap [m/s] to keep the time gap to whatever is in the path, and red lights.
+
+        A vehicle is in the path where a corner, the centre or an edge's midpoint of its
+        footprint comes within the ego's half width plus :data:`PATH_MARGIN` of a path sample
+        ahead of the ego (the trajectory and its straight extension); the gap is to the first
+        such sample. Only the samples within the vehicle's bounding circle plus that reach
+        can be in reach: one k-d tree query for all vehicles finds them.
+        """
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
         sim = sc.sim
         cap = math.inf
-        ids, fronts, heads, lens, wids, speeds, _ = self.others
-        ahead = self.path_s >= self.u
+        o = self.others
         reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
-        if len(ids):
-            # only vehicles whose bounding circle comes near the path (k-d tree of the path)
-            r_o = np.hypot(lens, wids) / 2.0
-            centres = fronts - (lens / 2.0)[:, None] * np.column_stack((np.cos(heads),
-                                                                       np.sin(heads)))
-            d0, _ = self.path_tree.query(centres, distance_upper_bound=float(
-                r_o.max() + reach + _PATH_SPACING))
-            sel = np.flatnonzero(d0 <= r_o + reach + _PATH_SPACING)
-        if len(ids) and len(sel):
-            ids = [ids[i] for i in sel]
-            fronts, heads, lens, wids, speeds = (fronts[sel], heads[sel], lens[sel], wids[sel],
-                                                 speeds[sel])
-            px = np.concatenate((self.path_xy[ahead], self.ext_xy))
-            ps = np.concatenate((self.path_s[ahead], self.ext_s))
-            ph = np.concatenate((self.path_heading[ahead], self.ext_heading))
-            corners = footprints(fronts, heads, lens, wids)  # (k, 4, 2)
-            centres = corners.mean(axis=1)
-            pts = np.concatenate((corners, centres[:, None, :],
-                                  (corners + np.roll(corners, -1, axis=1)) / 2.0), axis=1)
-            d = np.hypot(pts[:, :, None, 0] - px[None, None, :, 0],
-                         pts[:, :, None, 1] - px[None, None, :, 1])  # (k, 9, m)
-            near = d <= reach
-            hit = near.any(axis=(1, 2))
-            for j in np.flatnonzero(hit):
-                first = int(np.argmax(near[j].any(axis=0)))
-                gap = ps[first] - self.u - ego.length / 2.0
-                rel = float(np.cos(heads[j] - ph[first]))
-                v_l = max(speeds[j] * rel, 0.0)
-                cap = min(cap, _safe_speed(gap - sim.min_gap, v_l, tp.b_max, sim.time_gap))
+        if o.n:
+            balls = self.path_tree.query_ball_point(np.column_stack((o.cx, o.cy)),
+                                                    o.radius + reach)
+            i0 = int(np.searchsorted(self.path_s, self.u))  # first sample ahead
+            cand = []
+            for j, near in enumerate(balls):
+                if near and max(near) >= i0:
+                    cand.append((min(i for i in near if i >= i0), j))
+            cand.sort()
+            reach2 = reach * reach
+            base = self.u + ego.length / 2.0 + sim.min_gap
+            for lo, j in cand:
+                # the gap is at least up to the first sample in reach of the bounding
+                # circle, and a leader's speed is at least 0: nothing after can go lower
+                if _safe_speed(float(self.full_s[lo]) - base, 0.0, tp.b_max,
+                               sim.time_gap) >= cap:
+                    break
+                idx = np.asarray(balls[j])
+                idx = idx[idx >= i0]
+                pts = _probe_points(float(o.cx[j]), float(o.cy[j]), float(o.cos[j]),
+                                    float(o.sin[j]), 0.5 * float(o.length[j]),
+                                    0.5 * float(o.width[j]))  # (9, 2)
+                q = self.full_xy[idx]
+                ex = pts[:, 0, None] - q[:, 0]
+                ey = pts[:, 1, None] - q[:, 1]
+                hit = ((ex * ex + ey * ey) <= reach2).any(axis=0)
+                if not hit.any():
+                    continue
+                first = int(idx[hit].min())
+                gap = float(self.full_s[first]) - base
+                rel = math.cos(float(o.head[j]) - float(self.full_heading[first]))
+                v_l = max(float(o.speed[j]) * rel, 0.0)
+                cap = min(cap, _safe_speed(gap, v_l, tp.b_max, sim.time_gap))
         cap = min(cap, self._red_light_speed())
-        return cap, int(np.isfinite(cap))
+        return cap, int(math.isfinite(cap))
 
     def _red_light_speed(self) -> float:
         tp = self.sc.trajectory
@@ -1370,6 +1425,9 @@ class _RoadCheck:
         self.junctions = Obstacles.empty()
         self._cache_at: FloatArray | None = None
         self._cache = np.zeros(0, dtype=np.int64)
+        self._near_at: tuple[float, float] | None = None
+        self._near: tuple[FloatArray, ...] = ()
+        self._hot: tuple[FloatArray, ...] | None = None
 
     def add_junctions(self, shapes: list[FloatArray]) -> None:
         """Junction areas (SUMO's junction polygons) count as road too."""
@@ -1380,6 +1438,67 @@ class _RoadCheck:
             if abs(area2) > 1e-9:
                 good.append(p)
         self.junctions = Obstacles.from_polygons(good) if good else Obstacles.empty()
+
+    def contains_all(self, points: FloatArray, *, centre: tuple[float, float] | None = None,
+                     radius: float | None = None) -> bool:
+        """Whether every point ``(n, 2)`` of a small group (a footprint) is on the road,
+        as :meth:`contains`.
+
+        Keeps the lane segments that can reach any point within :data:`_ROAD_CACHE` / 2 of
+        where it last gathered them (by their exact distance to that place), and among
+        them the few that held the points last time: a footprint moving along a lane is
+        measured against those first, and against all gathered ones only when they do not
+        hold every point. ``centre`` [m] and ``radius`` [m]: a disc that holds the points,
+        if known (else their mean and largest distance from it).
+        """
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
+        if not len(self.a):
+            return False
+        if centre is None or radius is None:
+            cx, cy = pts.mean(axis=0).tolist()
+            spread = float(np.sqrt(((pts[:, 0] - cx) ** 2 + (pts[:, 1] - cy) ** 2).max()))
+        else:
+            (cx, cy), spread = centre, radius
+        if spread > _ROAD_CACHE / 2.0:
+            return bool(self.contains(pts).all())
+        if (self._near_at is None
+                or math.hypot(cx - self._near_at[0], cy - self._near_at[1]) > _ROAD_CACHE / 2.0):
+            self._gather(cx, cy)
+        if self._hot is not None and _in_bands(pts, self._hot).all():
+            return True
+        near = self._near
+        if len(near[0]):
+            within = _in_bands(pts, near, per_segment=True)  # (n, k)
+            on = within.any(axis=1)
+            hot = within.any(axis=0)
+            self._hot = tuple(v[hot] for v in near) if hot.any() else None
+            if on.all():
+                return True
+        else:
+            on = np.zeros(len(pts), dtype=bool)
+        if not len(self.junctions):
+            return False
+        rest = pts[~on]
+        near_j = self.junctions.near(rest, 1.0)
+        return bool(len(near_j) and (near_j.distance(rest) <= self.tol).all())
+
+    def _gather(self, cx: float, cy: float) -> None:
+        """Lane segments within reach (half width plus tolerance) of any point within
+        :data:`_ROAD_CACHE` of ``(cx, cy)``."""
+        from splineplan.geometry import point_segment_distance
+
+        centre = np.array([cx, cy])
+        idx = np.asarray(self.tree.query_ball_point(centre, self.radius + _ROAD_CACHE),
+                         dtype=np.int64)
+        if len(idx):
+            d = point_segment_distance(centre, self.a[idx], self.b[idx])
+            idx = idx[d - self.hw[idx] - self.tol <= _ROAD_CACHE]
+        a, ab, hw = self.a[idx], self.b[idx] - self.a[idx], self.hw[idx]
+        ln2 = ab[:, 0] ** 2 + ab[:, 1] ** 2
+        self._near = (a[:, 0].copy(), a[:, 1].copy(), ab[:, 0].copy(), ab[:, 1].copy(),
+                      1.0 / np.where(ln2 > 0, ln2, 1.0), (hw + self.tol) ** 2)
+        self._near_at = (cx, cy)
+        self._hot = None
 
     def contains(self, points: FloatArray) -> np.ndarray:
         """``(n,)`` booleans: the point is within a lane's half width of its centre line."""
@@ -1409,8 +1528,70 @@ class _RoadCheck:
         return np.asarray(on)
 
 
-_NO_OTHERS: tuple[Any, ...] = ([], np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
-                               np.zeros(0), np.zeros(0, dtype=bool))
+def _in_bands(pts: FloatArray, segs: tuple[FloatArray, ...], *, per_segment: bool = False
+              ) -> np.ndarray:
+    """Whether points ``(n, 2)`` lie within the bands of lane segments ``segs`` (start x, y,
+    direction x, y, 1 / squared length, squared reach): ``(n,)``, or ``(n, k)`` per segment."""
+    ax, ay, abx, aby, inv, lim2 = segs
+    dx = pts[:, 0, None] - ax  # (n, k)
+    dy = pts[:, 1, None] - ay
+    t = np.minimum(np.maximum((dx * abx + dy * aby) * inv, 0.0), 1.0)
+    ex = dx - t * abx
+    ey = dy - t * aby
+    within = (ex * ex + ey * ey) <= lim2
+    return within if per_segment else within.any(axis=1)
+
+
+class _Others:
+    """The vehicles around the ego at one step, as arrays (internal).
+
+    ``front`` ``(k, 2)`` [m] is SUMO's position (middle of the front bumper), ``head``
+    ``(k,)`` [rad] the heading, ``cx``, ``cy`` ``(k,)`` [m] the centre, ``radius`` ``(k,)``
+    [m] the bounding circle's.
+    """
+
+    __slots__ = (
+        "cos",
+        "cx",
+        "cy",
+        "front",
+        "head",
+        "ids",
+        "length",
+        "n",
+        "n_stopped",
+        "radius",
+        "sin",
+        "speed",
+        "stopped",
+        "width",
+    )
+
+    def __init__(self, ids: list[str], a: FloatArray, stopped_speed: float) -> None:
+        """``a`` ``(k, 7)``: x, y, SUMO angle [deg], length, width, speed, stop state."""
+        self.ids = ids
+        self.n = len(ids)
+        self.front = a[:, :2]
+        self.head = np.radians(90.0 - a[:, 2])
+        self.cos = np.cos(self.head)
+        self.sin = np.sin(self.head)
+        self.length = a[:, 3]
+        self.width = a[:, 4]
+        self.speed = a[:, 5]
+        state = a[:, 6]
+        if state.any():  # at a stop or parked (bits 1, 2) and standing
+            self.stopped = ((state.astype(np.int64) & 3) > 0) & (self.speed < stopped_speed)
+            self.n_stopped = int(np.count_nonzero(self.stopped))
+        else:
+            self.stopped = np.zeros(self.n, dtype=bool)
+            self.n_stopped = 0
+        half = 0.5 * self.length
+        self.cx = a[:, 0] - half * self.cos
+        self.cy = a[:, 1] - half * self.sin
+        self.radius = 0.5 * np.hypot(self.length, self.width)
+
+
+_NO_OTHERS = _Others([], np.zeros((0, 7)), 0.0)
 
 
 def _box(x: float, y: float, h: float, length: float, width: float) -> FloatArray:
@@ -1446,6 +1627,38 @@ def _jsonable(value: Any) -> Any:
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+def _locate(u: float, s: list[float]) -> tuple[int, float]:
+    """Segment ``j`` and fraction ``f`` of ``u`` on increasing stations ``s`` (clamped to the
+    ends, as :func:`numpy.interp`)."""
+    n = len(s)
+    if n < 2 or u <= s[0]:
+        return 0, 0.0
+    if u >= s[-1]:
+        return max(n - 2, 0), 1.0 if n >= 2 else 0.0
+    j = min(bisect.bisect_right(s, u) - 1, n - 2)
+    span = s[j + 1] - s[j]
+    return j, (u - s[j]) / span if span > 0 else 0.0
+
+
+def _interp(u: float, s: list[float], v: list[float]) -> float:
+    """``numpy.interp(u, s, v)`` for one value on plain lists."""
+    j, f = _locate(u, s)
+    if len(s) < 2:
+        return v[0]
+    return v[j] + f * (v[j + 1] - v[j])
+
+
+def _probe_points(cx: float, cy: float, c: float, s: float, hl: float, hw: float
+                  ) -> FloatArray:
+    """Corners, centre and edge midpoints ``(9, 2)`` of a rectangle [m] from its centre,
+    heading's cosine and sine, half length and half width."""
+    fx, fy, lx, ly = c * hl, s * hl, -s * hw, c * hw
+    return np.array([(cx - fx - lx, cy - fy - ly), (cx + fx - lx, cy + fy - ly),
+                     (cx + fx + lx, cy + fy + ly), (cx - fx + lx, cy - fy + ly), (cx, cy),
+                     (cx + fx, cy + fy), (cx + lx, cy + ly), (cx - fx, cy - fy),
+                     (cx - lx, cy - ly)])
 
 
 def _safe_speed(gap: float, v_leader: float, b: float, tau: float) -> float:

@@ -47,8 +47,8 @@ def speed_profile(
         Acceleration and braking limits [m/s^2], positive.
     start_speed
         Speed [m/s] at the first station. If it exceeds the limit there, or the curve ahead
-        cannot be taken from it within ``b_max``, the profile starts lower and a warning is
-        logged.
+        cannot be taken from it within ``b_max``, the profile starts lower (logged at
+        debug level: segment joins meet this routinely).
     end_speed
         Speed [m/s] at the last station (0 stops there); ``None`` keeps going as fast as
         the limits allow.
@@ -76,8 +76,8 @@ def speed_profile(
     out = np.clip(np.minimum(out, v2), 0.0, None)
     v = np.sqrt(np.asarray(out))
     if v[0] < start_speed - 1e-9:
-        log.warning("start speed %.2f m/s exceeds what the curve allows (%.2f m/s)",
-                    start_speed, v[0])
+        log.debug("start speed %.2f m/s exceeds what the curve allows (%.2f m/s)",
+                  start_speed, v[0])
     return v
 
 

@@ -96,6 +96,12 @@ class TrajectoryParams:
         Smallest turning radius [m] of the vehicle: a hard limit on the curvature.
     max_iterations
         Cap on the number of control-point moves tried.
+    patience
+        The optimisation also stops after this many rounds in a row that did not raise the
+        curve's minimum allowed speed (its objective): the slowest point is then held by a
+        bound (road edge, obstacle, turning limit) that the remaining moves cannot change.
+        Without it, routes through junction turns spent hundreds of rounds on moves that
+        were all refused or undone.
     band_fraction
         Fraction rho in [0, 1] of each free interval, centred on its midpoint, within which
         the initial control polygon crosses the sweep lines (band simplification); 0 keeps
@@ -120,6 +126,13 @@ class TrajectoryParams:
         the first curve is not clear, so it is off until that is resolved.
     band_reserve
         Room [m] that each band leaves to its free interval's ends on each side.
+    road_lateral_rate
+        Largest lateral change [m per m of station] of the control points where the road's
+        own width steps (:func:`road_tube`: a two-lane edge into a one-lane junction
+        stretch): the step is taken over ``step / road_lateral_rate`` metres before it.
+        0 (the default) leaves the steps as they are: 0.15 moves the curve into a
+        junction's lane ahead of it, but in the closed loop among moving traffic it took
+        the ego across its road beside a passing car, so it is off.
     """
 
     degree: int = 3
@@ -138,6 +151,8 @@ class TrajectoryParams:
     lead_in_time: float = 1.5
     lateral_rate: float = 0.0
     band_reserve: float = 0.15
+    road_lateral_rate: float = 0.0
+    patience: int = 12
 
     def __post_init__(self) -> None:
         if not isinstance(self.degree, int | np.integer) or not 2 <= self.degree <= 5:
@@ -154,13 +169,14 @@ class TrajectoryParams:
                 and 0.0 <= self.band_fraction <= 1.0):
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
-        for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "lateral_rate"):
+        for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "lateral_rate",
+                     "road_lateral_rate"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating | np.integer)
                     and np.isfinite(value) and value >= 0):
                 raise ParameterError(f"TrajectoryParams.{name} must be >= 0 and finite, "
                                      f"got {value!r}")
-        for name in ("max_iterations", "repair_rounds"):
+        for name in ("max_iterations", "repair_rounds", "patience"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
                 raise ParameterError(f"TrajectoryParams.{name} must be an integer >= 0, "
@@ -690,7 +706,8 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if reach <= 1e-6:
         raise TrajectoryError("the roadmap ends at or behind the vehicle: no curve to follow")
     lines = _vertex_lines(roadmap, corridor, distinct, sl[1:], params.band_fraction,
-                          params.band_reserve, params.lateral_rate)
+                          params.band_reserve, params.lateral_rate,
+                          params.road_lateral_rate)
     # the control points stand at the bands' centres (the roadmap vertices, except where
     # the lateral tube moved them)
     moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
@@ -744,7 +761,7 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
 
 def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.bool_],
                   sl: FloatArray, band_fraction: float, band_reserve: float = 0.0,
-                  lateral_rate: float = np.inf
+                  lateral_rate: float = np.inf, road_rate: float = 0.0
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Each roadmap vertex's sweep line and band: origin ``(m, 2)`` (lateral offset 0),
     tangent ``(m, 2)``, normal ``(m, 2)``, band centre ``(m,)`` [m] and half width ``(m,)`` [m].
@@ -766,6 +783,11 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
         lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
         hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
         tlo, thi = lateral_tube(s, lo, hi, lateral_rate)
+        if road_rate > 0:  # the road's own width steps, taken gradually
+            rlo, rhi = road_tube(corridor, s, roadmap.params, road_rate)
+            nlo, nhi = np.maximum(tlo, rlo), np.minimum(thi, rhi)
+            fits = nlo <= nhi
+            tlo, thi = np.where(fits, nlo, tlo), np.where(fits, nhi, thi)
         # the vertex, moved into the tube (and off its ends by the reserve where it can)
         q = np.minimum(band_reserve, (thi - tlo) / 2.0)
         centre = np.clip(sl[:, 1], tlo + q, thi - q)
@@ -775,6 +797,25 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
     else:
         centre, half = sl[:, 1], np.zeros(len(s))
     return origin, tangent, normal, centre, half
+
+
+def road_tube(corridor: Corridor, s: ArrayLike, params: RoadmapParams, rate: float
+              ) -> tuple[FloatArray, FloatArray]:
+    """Lateral offsets ``lo, hi`` ``(m,)`` [m] at stations ``s`` where the vehicle's centre keeps
+    the inflation distance from the road edges over its whole length (the road shrunk by
+    ``inflation``, narrowest within ``vehicle_length / 2`` ahead and behind), narrowed by
+    :func:`lateral_tube` at ``rate`` so that a width step is approached gradually. Where
+    nothing is left (a tight turn), the middle."""
+    st = np.asarray(s, dtype=float)
+    step = 0.5
+    grid = np.minimum(np.arange(0.0, corridor.length + step, step), corridor.length)
+    right, left = corridor.bounds_at(grid)
+    size = 2 * int(np.ceil(params.vehicle_length / 2.0 / step)) + 1
+    r = params.inflation
+    lo = np.interp(st, grid, maximum_filter1d(right + r, size, mode="nearest"))
+    hi = np.interp(st, grid, minimum_filter1d(left - r, size, mode="nearest"))
+    mid = (lo + hi) / 2.0
+    return lateral_tube(st, np.minimum(lo, mid), np.maximum(hi, mid), rate)
 
 
 def lateral_tube(s: ArrayLike, lo: ArrayLike, hi: ArrayLike, rate: float
@@ -1030,7 +1071,8 @@ class _Optimiser:
         k, n = self.k, self.n
         tried = accepted = refused = rounds = 0
         best = (float(self.kappa.max()), self._state())
-        while tried < p.max_iterations:
+        idle = 0
+        while tried < p.max_iterations and idle < p.patience:
             slow = self.kappa > p.kappa_smax * (1.0 + 1e-9)
             if not slow.any():
                 break
@@ -1056,6 +1098,9 @@ class _Optimiser:
             worst = float(self.kappa.max())
             if worst < best[0] - 1e-12 and acc.any():
                 best = (worst, self._state())
+                idle = 0
+            else:
+                idle += 1
         if float(self.kappa.max()) > best[0] + 1e-12:
             self._restore(best[1])
         log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)

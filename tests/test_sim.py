@@ -325,6 +325,51 @@ def test_box_distances_match_shapely() -> None:
     assert box_distances(footprint([0, 0], 0, 10, 1), np.stack([cross, inner])).tolist() == [0, 0]
 
 
+def test_road_check_matches_shapely_lane_bands() -> None:
+    """The per-step road check (lane segments kept near the ego, the ones that held it last
+    step tried first) against an independent oracle: sumolib's lanes buffered by half their
+    width plus the tolerance, and the junction areas, in shapely. Footprints wander along
+    the city route and off it."""
+    from shapely.geometry import LineString, Point
+    from shapely.ops import unary_union
+    from shapely.prepared import prep
+
+    from splineplan.sim import OFF_ROAD_TOLERANCE, _RoadCheck
+
+    path = NETS / "city.net.xml"
+    snet = sumolib.net.readNet(str(path), withInternal=True)
+    lanes = [ln for e in snet.getEdges(withInternal=True) for ln in e.getLanes()
+             if ln.allows("passenger") and len(ln.getShape()) >= 2]
+    junctions = [Polygon(n.getShape()) for n in snet.getNodes() if len(n.getShape()) >= 3]
+    road = unary_union([LineString(ln.getShape()).buffer(ln.getWidth() / 2 + OFF_ROAD_TOLERANCE)
+                        for ln in lanes] + [j.buffer(OFF_ROAD_TOLERANCE) for j in junctions])
+    inside, edge = prep(road), road.boundary
+    mine = load_network(path)
+    check = _RoadCheck(mine, "passenger")
+    check.add_junctions([np.asarray(n.getShape()) for n in snet.getNodes()
+                         if len(n.getShape()) >= 3])
+    corridor = route_corridor(mine, shortest_route(mine, "SWA0", "G1G2"))
+    rng = np.random.default_rng(5)
+    lat, agree, off = 0.0, 0, 0
+    for s in np.arange(2.0, corridor.length - 2.0, 0.4):
+        r, lft = (float(v[0]) for v in corridor.bounds_at([s]))
+        lat = float(np.clip(lat + rng.normal(0.0, 0.25), r - 1.5, lft + 1.5))
+        x, y = corridor.to_xy([s], [lat])[0]
+        h = float(corridor.heading_at([s])[0]) + rng.normal(0.0, 0.1)
+        box = footprint([x, y], h, 4.5, 1.8)
+        probe = np.vstack((box, (box + np.roll(box, -1, axis=0)) / 2.0))
+        if min(edge.distance(Point(p)) for p in probe) < 1e-3:
+            continue  # on the oracle's polygonal boundary: either answer is right
+        want = all(inside.contains(Point(p)) for p in probe)
+        got = check.contains_all(probe, centre=(float(x), float(y)),
+                                 radius=math.hypot(4.5, 1.8) / 2.0)
+        assert got == want, (s, lat)
+        assert bool(check.contains(probe).all()) == want
+        agree += 1
+        off += not want
+    assert agree > 2000 and 50 < off < agree - 500
+
+
 # ---- bad input and failures: a clear error, and the record written ------------------------
 
 def _status(out: Path) -> dict[str, object]:
