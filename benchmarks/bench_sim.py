@@ -11,9 +11,10 @@ run at a time, closed in between):
 - ``sumo``: SUMO's default lane-based model drives (no sublanes: SUMO's cheapest setup);
 - ``sublane``: SUMO's sublane model drives (the same SUMO options as the planner's run).
 
-Prints, per scenario and driver, the median wall time, the wall time per simulated second
-(each run stops when its ego arrives, at different times), the ratios planner / sumo and
-planner / sublane, and the planning time per replan (median and max).
+Prints, per scenario and driver, the median wall time and its split (inside SUMO, in the
+planner, in the closed loop's own code), the wall time per simulated second (each run stops
+when its ego arrives, at different times), the ratios planner / sumo and planner / sublane,
+and the planning time per replan (median and max).
 
 ``python -m benchmarks sim [--repeat N] [--scenario PATH ...]``
 """
@@ -38,6 +39,8 @@ def _one(scenario: Any, driver: str, out: Path) -> dict[str, float]:
     return {"wall": float(m["wall_time"]), "sim": float(m["sim_time_end"]),
             "travel": float(m["travel_time"] or 0.0), "arrived": float(r.arrived),
             "checks": float(m["safety_check_time"]),
+            "t_sumo": float(m["wall_time_sumo"]), "t_plan": float(m["wall_time_planner"]),
+            "t_loop": float(m["wall_time_loop"]),
             "plan_median": float(m["planning_time"]["median"] or 0.0),
             "plan_max": float(m["planning_time"]["max"] or 0.0),
             "replans": float(m["replan_count"]), "collisions": float(m["collisions"])}
@@ -73,6 +76,9 @@ def main(argv: list[str]) -> None:
                   f"({1e3 * per_s(d):5.2f} ms per simulated s; ego travel "
                   f"{med(d, 'travel'):.1f} s, arrived {med(d, 'arrived'):.0f}, collisions "
                   f"{med(d, 'collisions'):.0f}, own safety checks {med(d, 'checks'):.2f} s)")
+            print(f"           split: SUMO {med(d, 't_sumo'):.2f} s, "
+                  f"planner {med(d, 't_plan'):.2f} s, "
+                  f"loop {med(d, 't_loop'):.2f} s")
         print(f"  ratio planner/sumo {per_s('planner') / per_s('sumo'):.2f}, planner/sublane "
               f"{per_s('planner') / per_s('sublane'):.2f} (per simulated second; target "
               f"<= 1.5); raw wall ratios {med('planner', 'wall') / med('sumo', 'wall'):.2f}, "

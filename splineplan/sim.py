@@ -375,6 +375,8 @@ class _Run:
         self.planned_moving: tuple[str, ...] = ()  # beside vehicles the plan went around
         self.others = _NO_OTHERS
         self._beside_at: tuple[float, float] | None = None
+        self._turn_key: tuple[Corridor, float] | None = None
+        self._turn_window: FloatArray = np.zeros(0)
         self._beside_was: tuple[np.ndarray, FloatArray] = (np.zeros(0, dtype=np.int64),
                                                            np.zeros((0, 2)))
 
@@ -639,16 +641,15 @@ class _Run:
         t0 = time.perf_counter()
         res = self.sumo.vehicle.getContextSubscriptionResults(self.ego)
         self.sumo_seconds += time.perf_counter() - t0
-        if res:
-            res.pop(self.ego, None)
-        if not res:
+        ids = [vid for vid in res or () if vid != self.ego]
+        if not ids:
             self.others = _NO_OTHERS
             return
         pos, ang, spd = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED
         lng, wid, stop = c.VAR_LENGTH, c.VAR_WIDTH, c.VAR_STOPSTATE
         a = np.array([(*v[pos], v[ang], v[lng], v[wid], v[spd], v[stop])
-                      for v in res.values()], dtype=float)
-        self.others = _Others(list(res), a, self.sc.sim.stopped_speed)
+                      for v in map(res.__getitem__, ids)], dtype=float)
+        self.others = _Others(ids, a, self.sc.sim.stopped_speed)
 
     def _observe(self) -> None:
         """Read the world after a step; check where SUMO put the ego; safety checks."""
@@ -1009,9 +1010,12 @@ class _Run:
         dx, dy = o.cx - x, o.cy - y
         lon = dx * ch + dy * sh
         lat = np.abs(dy * ch - dx * sh)
+        # a vehicle heading more than 45 degrees plus the route's largest turn away from the
+        # ego's heading (within the beside stations) cannot drive the route's way
+        cos_min = math.cos(min(math.pi / 4.0 + self._route_turn(h), math.pi))
         cand = np.flatnonzero(~o.stopped & (lon > -_BESIDE_BACK - 5.0)
                               & (lon < _BESIDE_AHEAD + 5.0) & (lat > BESIDE_LATERAL - 0.5)
-                              & (lat < 10.0))
+                              & (lat < 10.0) & (o.cos * ch + o.sin * sh >= cos_min - 1e-9))
         if not len(cand):
             return cand, np.zeros((0, 2))
         c = self.corridor
@@ -1026,6 +1030,21 @@ class _Run:
                 & (sl[:, 1] >= right - 0.5) & (sl[:, 1] <= left + 0.5)
                 & (np.abs(sl[:, 1] - self.lateral) >= BESIDE_LATERAL))
         return cand[keep], sl[keep]
+
+    def _route_turn(self, h: float) -> float:
+        """Largest angle [rad] between a heading ``h`` and the route's segments from a metre
+        before :data:`_BESIDE_BACK` behind the ego's station to a metre after
+        :data:`_BESIDE_AHEAD` ahead (the window moves on once the ego has driven a metre)."""
+        c = self.corridor
+        assert c is not None
+        key = self._turn_key
+        if key is None or key[0] is not c or abs(self.station - key[1]) > 1.0:
+            lo = max(int(np.searchsorted(c.s, self.station - _BESIDE_BACK - 2.0)) - 1, 0)
+            hi = int(np.searchsorted(c.s, self.station + _BESIDE_AHEAD + 2.0)) + 1
+            self._turn_window = self._ref_heading[lo:hi]
+            self._turn_key = (c, self.station)
+        d = np.abs(np.mod(self._turn_window - h + math.pi, 2.0 * math.pi) - math.pi)
+        return float(d.max()) if len(d) else math.pi
 
     def _moving_obstacles(self) -> Obstacles:
         """Swept footprints of the moving vehicles beside the ego (:meth:`_beside`).
@@ -1538,8 +1557,8 @@ def _in_bands(pts: FloatArray, segs: tuple[FloatArray, ...], *, per_segment: boo
     t = np.minimum(np.maximum((dx * abx + dy * aby) * inv, 0.0), 1.0)
     ex = dx - t * abx
     ey = dy - t * aby
-    within = (ex * ex + ey * ey) <= lim2
-    return within if per_segment else within.any(axis=1)
+    within: np.ndarray = np.asarray((ex * ex + ey * ey) <= lim2)
+    return within if per_segment else np.asarray(within.any(axis=1))
 
 
 class _Others:
