@@ -1,0 +1,105 @@
+"""The three levels in one call, the obstacle-file reader and the ``plan`` command."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sumolib
+
+from splineplan.cli import main
+from splineplan.network import load_network, read_obstacles
+from splineplan.pipeline import plan
+from splineplan.route import shortest_route
+
+ROOT = Path(__file__).resolve().parent.parent
+NETS = ROOT / "sumo_nets"
+SCENARIOS = ROOT / "scenarios"
+
+
+@pytest.fixture(scope="module")
+def grid():
+    return load_network(NETS / "grid.net.xml")
+
+
+def test_plan_follows_level_one_and_joins_continuously(grid) -> None:
+    result = plan(grid, "A0B0", "D3C3")
+    assert result.route == shortest_route(grid, "A0B0", "D3C3")
+    assert result.blocked == ()
+    tr = result.trajectory
+    # one continuous curve: no jumps between samples, time increasing, ends at rest
+    steps = np.hypot(np.diff(tr.x), np.diff(tr.y))
+    assert steps.max() < 2.0
+    assert np.all(np.diff(tr.t) > 0)
+    assert tr.speed[-1] == pytest.approx(0.0, abs=1e-6)
+    # it runs the whole route: from the start of the first edge to the end of the last
+    assert tr.s[-1] == pytest.approx(result.corridor.length, rel=0.05)
+    assert min(result.route_seconds, result.roadmap_seconds, result.trajectory_seconds) > 0
+    assert result.total_seconds == pytest.approx(
+        result.route_seconds + result.roadmap_seconds + result.trajectory_seconds)
+
+
+def test_plan_reroutes_around_a_road_closed_by_stopped_cars(grid) -> None:
+    cars = read_obstacles(grid, SCENARIOS / "blocked_road.rou.xml")
+    direct = shortest_route(grid, "A1B1", "C1D1")
+    assert "B1C1" in direct.edges
+    result = plan(grid, "A1B1", "C1D1", cars)
+    assert result.blocked == ("B1C1",)
+    assert "B1C1" not in result.route.edges
+    assert result.route == shortest_route(grid, "A1B1", "C1D1", avoid=["B1C1"])
+    # the new trajectory keeps clear of the stopped cars
+    assert float(np.min(cars.distance(result.trajectory.xy))) > 1.0
+
+
+def test_read_obstacles_puts_stopped_cars_front_bumper_at_end_pos(grid) -> None:
+    cars = read_obstacles(grid, SCENARIOS / "blocked_road.rou.xml")
+    assert len(cars) == 2
+    sn = sumolib.net.readNet(str(NETS / "grid.net.xml"))
+    for i, lane_id in enumerate(("B1C1_0", "B1C1_1")):
+        lane = sn.getLane(lane_id)
+        front = np.array(sumolib.geomhelper.positionAtShapeOffset(lane.getShape(), 60.0))
+        poly = cars.polygon(i)
+        centre = poly.mean(axis=0)
+        # the box's front edge midpoint is the bumper: the centre plus half a length ahead
+        heading = np.array(lane.getShape()[-1]) - np.array(lane.getShape()[0])
+        heading /= np.hypot(*heading)
+        assert centre + 0.5 * np.ptp(poly @ heading) * heading == pytest.approx(front, abs=0.05)
+
+
+def test_read_obstacles_errors(grid, tmp_path: Path) -> None:
+    from splineplan.errors import NetworkError
+
+    with pytest.raises(NetworkError, match="not found"):
+        read_obstacles(grid, tmp_path / "missing.add.xml")
+    bad = tmp_path / "bad.rou.xml"
+    bad.write_text('<routes><vehicle id="v"><stop lane="nowhere_0" endPos="5"/></vehicle>'
+                   "</routes>")
+    with pytest.raises(NetworkError, match="nowhere_0"):
+        read_obstacles(grid, bad)
+
+
+def test_plan_command_writes_trajectory_plan_and_picture(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out, png = tmp_path / "plan", tmp_path / "plan.png"
+    rc = main(["plan", str(NETS / "straight.net.xml"), "e0", "e2", "--obstacles",
+               str(SCENARIOS / "one_obstacle.rou.xml"), "--out", str(out), "--plot", str(png)])
+    assert rc == 0
+    text = capsys.readouterr().out
+    assert "route: e0 e1 e2" in text and "level 3" in text
+    with (out / "trajectory.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    assert {"t", "x", "y", "heading", "speed", "curvature"} <= set(rows[0])
+    saved = json.loads((out / "plan.json").read_text())
+    assert saved["meta"]["route"] == ["e0", "e1", "e2"]
+    assert png.stat().st_size > 10_000
+
+
+def test_plan_command_errors_are_one_line(tmp_path: Path,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    rc = main(["plan", str(NETS / "straight.net.xml"), "e0", "e2", "--obstacles",
+               str(tmp_path / "missing.xml")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2 and len(err) == 1 and "missing.xml" in err[0]
