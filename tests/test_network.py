@@ -34,8 +34,6 @@ def _check_against_sumolib(path: Path, vclasses: tuple[str, ...]) -> None:
         i = net.edge_index(e.getID())
         assert net.lengths[i] == pytest.approx(e.getLength())
         assert net.speeds[i] == pytest.approx(e.getSpeed())
-        assert net.from_junctions[i] == e.getFromNode().getID()
-        assert net.to_junctions[i] == e.getToNode().getID()
         lanes = net.lanes_of(e.getID())
         assert [ln.id for ln in lanes] == [ln.getID() for ln in e.getLanes()]
         for ln, sl in zip(lanes, e.getLanes(), strict=True):
