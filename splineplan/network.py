@@ -451,23 +451,125 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
             lw = network.internal_lanes[left.via[0]].width
             if len(rshape) >= 2 and len(lshape) >= 2:
                 pieces.append(_band(rshape, rw, lshape, lw))
-    # Boundaries of each piece, joined; the reference line is the pieces' midlines joined
-    # and smoothed, so that where the drivable width changes (a one-lane junction into a
-    # two-lane edge) the reference bends gently instead of stepping sideways.
-    lefts, rights, mids, first = [], [], [], []
-    for ref, lo, ro in pieces:
-        normal = _vertex_normals(ref)
-        lefts.append(ref + lo[:, None] * normal)
-        rights.append(ref + ro[:, None] * normal)
-        mids.append(ref)
-        first.append(ref[0])
-    reference = _smooth_polyline(dedupe_polyline(np.concatenate(mids)), REFERENCE_SMOOTHING)
-    probe = Corridor.from_boundaries(np.concatenate(lefts), np.concatenate(rights),
-                                     reference=reference)
-    starts_s = probe.to_sl(np.array([first[k] for k in starts]))[:, 0]
+    pieces, starts = _trim_overlaps(pieces, starts)
+    # The reference line is the pieces' midlines joined and smoothed, so that where the
+    # drivable width changes (a one-lane junction into a two-lane edge) it bends gently
+    # instead of stepping sideways. Each piece's offsets are carried over through its
+    # midline (projected onto the reference, plus the band's half widths) rather than by
+    # projecting its outer boundaries, which fold on the inner side of tight bends.
+    reference = _smooth_polyline(dedupe_polyline(np.concatenate([p[0] for p in pieces])),
+                                 REFERENCE_SMOOTHING)
+    probe = Corridor.from_reference(reference, np.full(len(reference), 1e3),
+                                    np.full(len(reference), -1e3))
+    left_off, right_off = _union_offsets(probe, pieces)
+    left_off, right_off = _limit_to_curvature(probe, left_off, right_off)
+    starts_s = probe.to_sl(np.array([pieces[k][0][0] for k in starts]))[:, 0]
     starts_s[0] = 0.0
     starts_s = np.maximum.accumulate(np.clip(starts_s, 0.0, probe.length))
-    return Corridor(probe.reference, probe.s, probe.left, probe.right, edges, starts_s)
+    return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s)
+
+
+#: Narrowest drivable width [m] a route corridor keeps around its reference line, where
+#: the network's lane shapes leave less (shapes that overlap or cross at a join).
+MIN_CORRIDOR_WIDTH = 3.0
+
+
+def _trim_overlaps(
+    pieces: list[tuple[FloatArray, FloatArray, FloatArray]], starts: list[int],
+) -> tuple[list[tuple[FloatArray, FloatArray, FloatArray]], list[int]]:
+    """Pieces without the parts that lie behind the end of the piece before them.
+
+    Some networks draw consecutive edges (and the junction lane between them) overlapping:
+    the next lane starts metres behind the end of the previous one. Joined as they are,
+    the reference line would run backwards there. Points behind the previous piece's end
+    (across the normal at its last point) are dropped, a junction piece with fewer than two
+    points left entirely; an edge's own piece keeps at least its last two points.
+    """
+    own = set(starts)
+    out: list[tuple[FloatArray, FloatArray, FloatArray]] = []
+    new_starts: list[int] = []
+    for k, (ref, lo, ro) in enumerate(pieces):
+        if out:
+            prev = out[-1][0]
+            end, d = prev[-1], prev[-1] - prev[-2]
+            d = d / max(float(np.hypot(*d)), 1e-12)
+            ahead = (ref - end) @ d > -0.05
+            if ahead.sum() < 2:
+                if k not in own:
+                    continue
+                ahead[-2:] = True
+            ref, lo, ro = ref[ahead], lo[ahead], ro[ahead]
+        if k in own:
+            new_starts.append(len(out))
+        out.append((ref, lo, ro))
+    return out, new_starts
+
+
+def _union_offsets(
+    probe: Corridor, pieces: list[tuple[FloatArray, FloatArray, FloatArray]],
+) -> tuple[FloatArray, FloatArray]:
+    """Left and right offsets ``(n,)`` [m] of the union of the pieces' bands.
+
+    Each piece covers the stations its midline projects onto; stations no piece covers
+    (a join without junction lanes) are interpolated between their neighbours.
+    """
+    n = len(probe.s)
+    left = np.full(n, -np.inf)
+    right = np.full(n, np.inf)
+    for ref0, lo0, ro0 in pieces:
+        s0 = polyline_stations(ref0)  # densely, so that the lateral offsets follow the bends
+        u = np.linspace(0.0, s0[-1], max(2, int(np.ceil(s0[-1] / 0.5)) + 1))
+        ref = np.column_stack((np.interp(u, s0, ref0[:, 0]), np.interp(u, s0, ref0[:, 1])))
+        lo, ro = np.interp(u, s0, lo0), np.interp(u, s0, ro0)
+        sl = probe.to_sl(ref)
+        s = np.maximum.accumulate(sl[:, 0])
+        keep = np.concatenate(([True], np.diff(s) > 1e-6))
+        s, lft, rgt = s[keep], (sl[:, 1] + lo)[keep], (sl[:, 1] + ro)[keep]
+        inside = (probe.s >= s[0] - 0.25) & (probe.s <= s[-1] + 0.25)
+        if len(s) == 1:
+            lft_i, rgt_i = np.full(inside.sum(), lft[0]), np.full(inside.sum(), rgt[0])
+        else:
+            lft_i, rgt_i = np.interp(probe.s[inside], s, lft), np.interp(probe.s[inside], s, rgt)
+        left[inside] = np.maximum(left[inside], lft_i)
+        right[inside] = np.minimum(right[inside], rgt_i)
+    covered = np.isfinite(left)
+    if not covered.any():
+        raise GeometryError("route corridor: no lane projects onto the reference line")
+    left = np.interp(probe.s, probe.s[covered], left[covered])
+    right = np.interp(probe.s, probe.s[covered], right[covered])
+    return left, right
+
+
+def _limit_to_curvature(probe: Corridor, left: FloatArray, right: FloatArray
+                        ) -> tuple[FloatArray, FloatArray]:
+    """Offsets kept within the reference's radius of curvature on the inner side of bends.
+
+    Beyond that radius the (s, l) frame folds over itself. Where this (or lane shapes
+    that cross) leaves less than :data:`MIN_CORRIDOR_WIDTH`, the corridor is widened
+    symmetrically about its middle to that width, within the same radius limits.
+    """
+    from scipy.ndimage import gaussian_filter1d
+
+    h = np.unwrap(probe._heading)
+    ds = np.maximum(np.diff(probe.s), 1e-9)
+    kappa = np.gradient(h) / ds
+    kappa = np.concatenate((kappa, kappa[-1:]))
+    kappa = gaussian_filter1d(kappa, 2.0, mode="nearest")
+    with np.errstate(divide="ignore"):
+        radius = np.where(np.abs(kappa) > 1e-6, 0.9 / np.abs(kappa), np.inf)
+    left = np.where(kappa > 0, np.minimum(left, radius), left)
+    right = np.where(kappa < 0, np.maximum(right, -radius), right)
+    narrow = left - right < MIN_CORRIDOR_WIDTH
+    if narrow.any():
+        log.debug("route corridor: widened to %.1f m at %d stations",
+                  MIN_CORRIDOR_WIDTH, int(narrow.sum()))
+        mid = np.clip((left + right) / 2.0, -radius + MIN_CORRIDOR_WIDTH / 2.0,
+                      radius - MIN_CORRIDOR_WIDTH / 2.0)
+        mid = np.where(np.isfinite(mid), mid, (left + right) / 2.0)
+        half = MIN_CORRIDOR_WIDTH / 2.0
+        left = np.where(narrow, np.maximum(left, mid + half), left)
+        right = np.where(narrow, np.minimum(right, mid - half), right)
+    return left, right
 
 
 #: Standard deviation [m] of the Gaussian that smooths a route corridor's reference line.

@@ -3,10 +3,18 @@
 Level 1 picks the roads; the route's drivable area becomes a corridor; levels 2 and 3 plan
 along it (:func:`splineplan.planner.plan_corridor`). Where level 2 finds a road closed, the
 closed edge is avoided and level 1 plans again, as the paper's conclusion proposes.
+
+Turnarounds. Level 1 is length-optimal and may turn back onto the reverse edge (at a dead
+end, or where a U-turn is shorter than going round a block). A corridor cannot fold back
+on itself, and levels 2 and 3 plan forward motion only, so the pipeline asks level 1 for
+the shortest route without turnaround connections (SUMO direction ``t``) and falls back to
+the shortest route only when every route needs one. :attr:`Plan.route` is the route
+planned; it is longer than level 1's optimum exactly when the optimum turns around.
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
 from collections.abc import Iterable
@@ -16,12 +24,12 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from splineplan.corridor import Corridor
-from splineplan.errors import RoadBlockedError
+from splineplan.errors import NoRouteError, RoadBlockedError
 from splineplan.network import RoadNetwork, route_corridor
 from splineplan.obstacles import Obstacles
 from splineplan.planner import plan_corridor
 from splineplan.roadmap import Roadmap, RoadmapParams
-from splineplan.route import Route, shortest_route
+from splineplan.route import Route, is_turnaround, shortest_route
 from splineplan.trajectory import Trajectory, TrajectoryParams
 
 log = logging.getLogger(__name__)
@@ -116,7 +124,7 @@ def plan(
     t_route = t_roadmap = t_traj = 0.0
     while True:
         t0 = time.perf_counter()
-        route = shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+        route = _forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
                                avoid=avoided, start_pos=start_pos)
         corridor = route_corridor(network, route, vclass=vclass)
         t_route += time.perf_counter() - t0
@@ -140,3 +148,21 @@ def plan(
         return Plan(route, corridor, tuple(result.roadmaps), result.trajectory,
                     tuple(blocked), t_route, t_roadmap + result.roadmap_seconds,
                     t_traj + result.trajectory_seconds)
+
+
+def turnarounds(network: RoadNetwork, route: Route) -> tuple[int, ...]:
+    """Indices ``i`` where the route turns back from ``edges[i]`` onto ``edges[i + 1]``."""
+    return tuple(i for i, (e, f) in enumerate(itertools.pairwise(route.edges))
+                 if is_turnaround(network, e, f, route.vclass))
+
+
+def _forward_route(network: RoadNetwork, from_edge: str, to_edge: str, *, vclass: str,
+                   weight: str, avoid: Iterable[str], start_pos: float) -> Route:
+    """The shortest route without turnarounds, or the shortest where every route has one."""
+    try:
+        return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                              avoid=avoid, start_pos=start_pos, turnarounds=False)
+    except NoRouteError:
+        log.info("every route %s -> %s turns around: planning the shortest", from_edge, to_edge)
+        return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                              avoid=avoid, start_pos=start_pos)

@@ -2,11 +2,13 @@
 
 The corridor is cut into overlapping segments of at most ``RoadmapParams.segment_length``.
 Each segment's roadmap and trajectory start from the pose of the previous segment's
-trajectory at a join point half-way into their overlap, so position and heading are
-continuous there; the speed profile then runs once over the joined curve, so speed is
-continuous too. The cuts are placed where the road is straightest and keeps its width
-(:func:`cut_stations`): a join inside a tight turn would restart the next curve with zero
-curvature there, and a segment's end inside a turn ends its curve on a clamped corner.
+trajectory at a join point in the middle half of their overlap, where that trajectory runs
+straightest along the road (:func:`join_indices`; the next best joins are tried if the
+segment comes out infeasible), so position and heading are continuous there; the speed
+profile then runs once over the joined curve, so speed is continuous too. The cuts are
+placed where the road is straightest and keeps its width (:func:`cut_stations`): a join
+inside a tight turn would restart the next curve with zero curvature there, and a
+segment's end inside a turn ends its curve on a clamped corner.
 
 Level 2 models the vehicle as a disc of its width; a rectangle's corners reach
 ``(vehicle_length - vehicle_width) / 2`` [m] further ahead and behind. So level 2 plans among
@@ -25,11 +27,11 @@ from typing import Any
 
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import Corridor
-from splineplan.errors import TrajectoryError
-from splineplan.geometry import FloatArray
+from splineplan.errors import SplineplanError, TrajectoryError
+from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
 from splineplan.speed import allowed_speed, speed_profile
@@ -48,6 +50,10 @@ SEGMENT_OVERLAP = 30.0
 #: Fraction of ``segment_length`` within which a segment's end is chosen (see
 #: :func:`cut_stations`): each segment is between this fraction and all of it long.
 CUT_WINDOW = 0.6
+#: Distance [m] over which a join's curvature counts as heading error (see :func:`join_indices`).
+JOIN_LOOKAHEAD = 5.0
+#: Joins tried (see :func:`join_indices`) before a segment is left infeasible.
+JOIN_TRIES = 3
 
 
 @dataclass(frozen=True, eq=False)
@@ -102,40 +108,57 @@ def plan_corridor(
     tp = params or TrajectoryParams()
     overlap = min(SEGMENT_OVERLAP, rp.segment_length / 4.0)
     cuts = cut_stations(corridor, rp.segment_length, overlap)
+    # a join's pose lies on a curve planned past it: no lead-in for its speed, which would
+    # hold the next curve on the join's tangent for up to half the lead-in
+    tp_join = replace(tp, lead_in_time=0.0)
     pieces = [corridor.slice(a, b) for a, b in cuts] if len(cuts) > 1 else [corridor]
     pose = np.asarray(start_xy, dtype=float).reshape(2)
-    heading = start_heading
-    speed = start_speed
     roadmaps: list[Roadmap] = []
     parts: list[Trajectory] = []
     t_roadmap = t_traj = 0.0
+    prev: Trajectory | None = None  # the previous segment's whole trajectory
     for i, seg in enumerate(pieces):
         seg_obs = obstacles.near(seg.polygon(), 0.0) if len(obstacles) else obstacles
-        t0 = time.perf_counter()
-        rm = plan_roadmap(seg, elongate_for_roadmap(seg, seg_obs, rp), pose, rp)
-        t1 = time.perf_counter()
-        tr = plan_trajectory(rm, seg, seg_obs, tp, heading, start_speed=speed,
-                             end_speed=None)
-        t_roadmap += t1 - t0
-        t_traj += time.perf_counter() - t1
+        joins = ([-1] if prev is None else
+                 join_indices(prev, pieces[i - 1], seg.offset - pieces[i - 1].offset,
+                              overlap)[:JOIN_TRIES])
+        tried: list[tuple[int, Roadmap, Trajectory]] = []
+        for attempt, cut in enumerate(joins):
+            if prev is not None:
+                pose = np.array([prev.x[cut], prev.y[cut]])
+            t0 = time.perf_counter()
+            t1 = t0
+            try:
+                rm = plan_roadmap(seg, elongate_for_roadmap(seg, seg_obs, rp), pose, rp)
+                t1 = time.perf_counter()
+                tr = plan_trajectory(
+                    rm, seg, seg_obs, tp if prev is None else tp_join,
+                    start_heading if prev is None else float(prev.heading[cut]),
+                    start_speed=start_speed if prev is None else float(prev.speed[cut]),
+                    end_speed=None)
+            except SplineplanError:
+                if attempt + 1 == len(joins):
+                    raise
+                continue
+            finally:
+                t2 = time.perf_counter()
+                t_roadmap += t1 - t0
+                t_traj += t2 - t1
+            tried.append((cut, rm, tr))
+            if tr.feasible:
+                break
+            log.debug("segment at %.1f m infeasible from join %d", seg.offset, attempt)
+        # the first feasible attempt, else the one from the best join
+        cut, rm, tr = tried[-1] if tried[-1][2].feasible else tried[0]
+        if prev is not None:
+            parts.append(_head(prev, cut + 1))
         roadmaps.append(rm)
-        if i + 1 < len(pieces):
-            # join half-way into the overlap with the next piece (stations of the whole route)
-            join = pieces[i + 1].offset + overlap / 2.0 - seg.offset
-            st = seg.to_sl(tr.xy)[:, 0]
-            cut = int(np.searchsorted(st, join))
-            if cut <= 0 or cut >= len(st):
-                raise TrajectoryError(
-                    f"trajectory does not reach the join at station "
-                    f"{seg.offset + join:.1f} m")
-            tr = _head(tr, cut + 1)
-            pose = np.array([tr.x[-1], tr.y[-1]])
-            heading = float(tr.heading[-1])
-            speed = float(tr.speed[-1])
-        parts.append(tr)
-    t2 = time.perf_counter()
+        prev = tr
+    assert prev is not None
+    parts.append(prev)
+    t3 = time.perf_counter()
     joined = _join(parts, tp, start_speed, end_speed)
-    t_traj += time.perf_counter() - t2
+    t_traj += time.perf_counter() - t3
     return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
 
 
@@ -175,6 +198,36 @@ def cut_stations(corridor: Corridor, length: float, overlap: float
         a = float(grid[j]) - overlap
     cuts.append((a, total))
     return cuts
+
+
+def join_indices(tr: Trajectory, seg: Corridor, next_start: float, overlap: float
+                 ) -> NDArray[np.int64]:
+    """Candidate samples of ``tr`` (planned along ``seg``) where the next segment, which
+    starts at station ``next_start`` [m] of ``seg``, may take over, best first.
+
+    Joins lie in the middle half of the overlap ``[next_start, next_start + overlap]``.
+    The best is where the curve runs most nearly along the road and straight (least
+    heading error plus ``JOIN_LOOKAHEAD`` times the curvature, in steps of 0.01), nearest
+    the overlap's middle among equals: the next curve starts on that tangent, so a join in
+    the middle of a lane change would send it on sideways. The others follow at least
+    ``overlap / 8`` [m] apart, in the same order.
+    """
+    st = seg.to_sl(tr.xy)[:, 0]
+    lo, hi = next_start + overlap / 4.0, next_start + 3.0 * overlap / 4.0
+    cand = np.flatnonzero((st >= lo) & (st <= hi))
+    if len(cand) == 0 or cand[0] == 0:
+        raise TrajectoryError(
+            f"trajectory does not reach the join at station "
+            f"{seg.offset + next_start + overlap / 2.0:.1f} m")
+    off = np.abs(wrap_angle(tr.heading[cand] - seg.heading_at(st[cand])))
+    bad = np.round((off + JOIN_LOOKAHEAD * np.abs(tr.curvature[cand])) / 0.01)
+    mid = np.abs(st[cand] - (next_start + overlap / 2.0))
+    order = cand[np.lexsort((mid, bad))]
+    out: list[int] = []
+    for j in order.tolist():
+        if all(abs(st[j] - st[k]) >= overlap / 8.0 for k in out):
+            out.append(j)
+    return np.asarray(out, dtype=np.int64)
 
 
 def elongate_for_roadmap(corridor: Corridor, obstacles: Obstacles,

@@ -18,7 +18,7 @@ import itertools
 import logging
 import weakref
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -81,6 +81,7 @@ def shortest_route(
     weight: str = "length",
     avoid: Iterable[str] = (),
     start_pos: float = 0.0,
+    turnarounds: bool = True,
 ) -> Route:
     """The least-cost route from ``from_edge`` to ``to_edge`` for vehicle class ``vclass``.
 
@@ -99,6 +100,10 @@ def shortest_route(
     start_pos
         Position [m] along the origin edge, in ``[0, length]``; the route's length and
         cost count from there.
+    turnarounds
+        Whether the route may turn back onto the reverse edge where the only connection
+        for that step is a turnaround (SUMO direction ``t``). Planners that drive forward
+        only pass ``False``; the route is then the least-cost one without such a step.
 
     Raises
     ------
@@ -132,10 +137,14 @@ def shortest_route(
                                f"the {name} edge '{network.edge_ids[i]}' is to be avoided")
 
     search = _search(network, graph, weight)
-    path = dijkstra(search.adjacency, src, dst, blocked, search.potential(src, dst))
+    adjacency = search.adjacency if turnarounds else _forward(network, graph, search, vclass)
+    # the landmark bounds hold on the graph without turnarounds too (it only loses arcs)
+    path = dijkstra(adjacency, src, dst, blocked, search.potential(src, dst))
     if path is None:
         msg = (f"no route from edge '{from_edge}' to edge '{to_edge}' "
                f"for vehicle class '{vclass}'")
+        if not turnarounds:
+            msg += " without turnarounds"
         if blocked:
             names = sorted(network.edge_ids[i] for i in blocked)
             shown = ", ".join(names[:10]) + (", ..." if len(names) > 10 else "")
@@ -226,6 +235,7 @@ class _Search:
     adjacency: list[list[tuple[int, float]]]
     from_landmark: FloatArray
     to_landmark: FloatArray
+    forward: dict[str, list[list[tuple[int, float]]]] = field(default_factory=dict)
 
     def potential(self, source: int, target: int) -> list[float]:
         """Landmark lower bounds (ALT) of every vertex's cost to ``target``."""
@@ -250,6 +260,25 @@ def _search(network: RoadNetwork, graph: ClassGraph, weight: str) -> _Search:
     if found is None:
         found = _build_search(_arc_costs(network, graph, weight), graph)
         per_graph[weight] = found
+    return found
+
+
+def is_turnaround(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str) -> bool:
+    """Whether every connection ``vclass`` may use from ``from_edge`` to ``to_edge`` is a
+    turnaround (SUMO direction ``t``)."""
+    conns = network.connections_between(from_edge, to_edge, vclass=vclass)
+    return bool(conns) and all(c.direction == "t" for c in conns)
+
+
+def _forward(network: RoadNetwork, graph: ClassGraph, search: _Search,
+             vclass: str) -> list[list[tuple[int, float]]]:
+    """The search's arc lists without turnaround steps (built on first use, cached)."""
+    found = search.forward.get(vclass)
+    if found is None:
+        ids = network.edge_ids
+        found = [[(v, c) for v, c in arcs if not is_turnaround(network, ids[u], ids[v], vclass)]
+                 for u, arcs in enumerate(search.adjacency)]
+        search.forward[vclass] = found
     return found
 
 

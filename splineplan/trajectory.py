@@ -44,12 +44,16 @@ Steps, and the choices beyond the paper:
 6. Single moves can sharpen a bend for a while, so the curve returned is the one with the
    highest minimum allowed speed seen after any round: it never decreases.
 7. Speed profile (:mod:`splineplan.speed`) along the final curve, sampled evenly in arc length.
+8. Detour: where the curve along level 2's path ends infeasible (the widest path can cross
+   lanes faster than any curve within the turning limit), the same graph is searched for
+   a path of limited lateral rate (:func:`detour_roadmap`) and steps 1-7 run along it; its
+   curve is kept if it is feasible.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -133,6 +137,10 @@ class TrajectoryParams:
         0 (the default) leaves the steps as they are: 0.15 moves the curve into a
         junction's lane ahead of it, but in the closed loop among moving traffic it took
         the ego across its road beside a passing car, so it is off.
+    detour_rate
+        Largest lateral change [m per m of station] of the detour path
+        (:func:`detour_roadmap`) tried when the curve along level 2's path is not
+        feasible; 0: no detour.
     """
 
     degree: int = 3
@@ -153,6 +161,7 @@ class TrajectoryParams:
     band_reserve: float = 0.15
     road_lateral_rate: float = 0.0
     patience: int = 12
+    detour_rate: float = 0.4
 
     def __post_init__(self) -> None:
         if not isinstance(self.degree, int | np.integer) or not 2 <= self.degree <= 5:
@@ -170,7 +179,7 @@ class TrajectoryParams:
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
         for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "lateral_rate",
-                     "road_lateral_rate"):
+                     "road_lateral_rate", "detour_rate"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating | np.integer)
                     and np.isfinite(value) and value >= 0):
@@ -520,7 +529,8 @@ def _rect_polygon_distance(centers: FloatArray, headings: FloatArray, hl: float,
     au, av = np.abs(u), np.abs(v)
     # polygon vertices to the filled rectangle
     dv = np.hypot(np.maximum(au - hl, 0.0), np.maximum(av - hw, 0.0)).min(axis=1)
-    ub, vb = np.roll(u, -1, axis=1), np.roll(v, -1, axis=1)
+    ub = np.concatenate((u[:, 1:], u[:, :1]), axis=1)  # the next vertex (np.roll, cheaper)
+    vb = np.concatenate((v[:, 1:], v[:, :1]), axis=1)
     du, dvv = ub - u, vb - v
     # rectangle corners ``(4,)`` to polygon edges: arrays (p, 4, V)
     seg2 = du * du + dvv * dvv
@@ -651,9 +661,26 @@ def plan_trajectory(
         Fewer than two distinct roadmap points, or a start off the road.
     """
     params = params or TrajectoryParams()
-    rp = roadmap.params
     if not (np.isfinite(start_speed) and start_speed >= 0):
         raise TrajectoryError(f"start speed must be >= 0, got {start_speed!r}")
+    traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
+                      end_speed)
+    if traj.feasible or params.detour_rate <= 0:
+        return traj
+    detour = detour_roadmap(roadmap, corridor, params.detour_rate)
+    if detour is None:
+        return traj
+    other = _plan_once(detour, corridor, obstacles, params, start_heading, start_speed,
+                       end_speed)
+    log.debug("level 2's path gives no feasible curve; detour feasible: %s", other.feasible)
+    return other if other.feasible else traj
+
+
+def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
+               params: TrajectoryParams, start_heading: float | None, start_speed: float,
+               end_speed: float | None) -> Trajectory:
+    """:func:`plan_trajectory` along the roadmap's chosen path."""
+    rp = roadmap.params
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed)
     checker = _Checker.build(corridor, obstacles, rp, pool)
     curve, refinements, doubled, samples = _refine(pool, counts, checker, params)
@@ -757,6 +784,95 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
         counts = np.insert(counts, at, 1)
     pool = np.vstack((start, heading_point, verts))
     return pool, np.concatenate(([1, 1], counts)).astype(np.int64)
+
+
+#: Lateral grid step [m] of :func:`detour_roadmap`'s search.
+_DETOUR_STEP = 0.1
+#: Distance [m] to a free interval's ends below which the detour search pays for nearness.
+_DETOUR_CLEAR = 1.0
+
+
+def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap | None:
+    """Level 2's roadmap with its path replaced by one that a curve can follow.
+
+    The widest path may jump between lanes wherever a sweep line is free across (its
+    vertex stands mid-road), and a lane a hair narrower than the bottleneck elsewhere
+    sends it across two lanes and back within a gap between parked cars, which no curve
+    within the turning limit follows. This searches the same graph (its free intervals
+    and arcs) on a lateral grid of :data:`_DETOUR_STEP` [m] for the path whose lateral
+    offset changes by at most ``rate`` [m per m of station] from line to line, starting
+    at the vehicle's offset, that minimises the sum of squared lateral steps over their
+    lengths plus a penalty for passing within :data:`_DETOUR_CLEAR` [m] of an interval's
+    end (dynamic programming over the lines). Its vertices stand at those offsets, inside
+    their free intervals. ``None`` if the graph has no such path.
+    """
+    line = np.asarray(roadmap.graph_line, dtype=np.int64)
+    if len(line) == 0 or len(roadmap.arcs) == 0 or rate <= 0:
+        return None
+    lo_v = np.asarray(roadmap.graph_lo, dtype=float)
+    hi_v = np.asarray(roadmap.graph_hi, dtype=float)
+    n_lines, n_v = int(line.max()) + 1, len(line)
+    st = np.zeros(n_lines)
+    st[line] = roadmap.graph_s
+    h = _DETOUR_STEP
+    l0 = float(lo_v.min()) - h
+    nb = int(np.ceil((float(hi_v.max()) + h - l0) / h)) + 1
+    grid = l0 + h * np.arange(nb)
+    # vid[k, b]: the vertex of line k whose interval holds grid offset b (half a step of
+    # tolerance, so that zero-width intervals count), -1 where none does
+    vid = np.full((n_lines, nb), -1, dtype=np.int64)
+    b_lo = np.ceil((lo_v - h / 2 - l0) / h - 1e-9).astype(np.int64)
+    b_hi = np.floor((hi_v + h / 2 - l0) / h + 1e-9).astype(np.int64)
+    for v in range(n_v):
+        vid[line[v], b_lo[v]:b_hi[v] + 1] = v
+    lv = np.clip(grid[None, :], lo_v[vid], hi_v[vid])
+    near = np.minimum(lv - lo_v[vid], hi_v[vid] - lv)
+    penalty = np.where(vid >= 0, np.maximum(_DETOUR_CLEAR - near, 0.0) ** 2, np.inf)
+    # moves b - dlt -> b between lines k and k + 1 that follow an arc within the rate:
+    # ok[k, b, dlt + r], with their lateral cost
+    ds = np.maximum(np.diff(st), 1e-6)
+    r = int(np.floor(rate * float(ds.max()) / h + 1e-9))
+    dlt = np.arange(-r, r + 1)
+    frm = np.arange(nb)[:, None] - dlt[None, :]
+    inside = (frm >= 0) & (frm < nb)
+    fv = np.where(inside[None], vid[:-1][:, np.clip(frm, 0, nb - 1)], -1)
+    tv = vid[1:][:, :, None]
+    arcs = np.asarray(roadmap.arcs, dtype=np.int64)
+    keys = np.sort(arcs[:, 0] * n_v + arcs[:, 1])
+    key = fv * n_v + tv
+    at = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
+    ok = (fv >= 0) & (tv >= 0) & (keys[at] == key)
+    ok &= np.abs(dlt)[None, None, :] * h <= rate * ds[:, None, None] + 1e-9
+    lat_cost = (dlt[None, :] * h) ** 2 / ds[:, None]  # (lines - 1, 2r + 1)
+    frm_c = np.clip(frm, 0, nb - 1)
+    # start: the source vertex, at the vehicle's offset
+    src = int(roadmap.path[0])
+    l_start = float(corridor.to_sl(np.asarray(roadmap.start_xy, dtype=float)[None])[0, 1])
+    cost = np.where(vid[0] == src, np.abs(grid - l_start), np.inf)
+    cost = np.where(cost <= np.min(cost) + 1e-9, penalty[0], np.inf)
+    back = np.zeros((n_lines, nb), dtype=np.int64)
+    rows = np.arange(nb)
+    for k in range(n_lines - 1):
+        cand = np.where(ok[k], cost[frm_c] + lat_cost[k], np.inf)
+        j = np.argmin(cand, axis=1)
+        cost = cand[rows, j] + penalty[k + 1]
+        back[k + 1] = frm_c[rows, j]
+    if not np.isfinite(cost).any():
+        return None
+    bins = np.zeros(n_lines, dtype=np.int64)
+    bins[-1] = int(np.argmin(cost))
+    for k in range(n_lines - 1, 0, -1):
+        bins[k - 1] = back[k, bins[k]]
+    ks = np.arange(n_lines)
+    path = vid[ks, bins]
+    lat = lv[ks, bins]
+    xy = corridor.to_xy(st, lat)
+    width = np.asarray(roadmap.graph_width, dtype=float)[path]
+    j = int(np.argmin(width))
+    return replace(roadmap, xy=xy, s=st.copy(), l=lat, width=width,
+                   bottleneck_width=float(width[j]), bottleneck_index=j,
+                   length=float(polyline_stations(xy)[-1]), path=path,
+                   links=np.zeros((0, 2, 2)))
 
 
 def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.bool_],
@@ -895,6 +1011,21 @@ def _farthest(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArr
     """
     if cap <= i + 1:
         return min(i + 1, len(pts) - 1)
+    # the test is a running one: a window of candidates gives the same answer as all of
+    # them unless every candidate in it passes, then a window four times as long
+    window = 32
+    while True:
+        end = min(cap, i + window)
+        j = _farthest_upto(p, i, end, pts, origin, tangent, normal, centre, half, tol)
+        if j < end or end == cap:
+            return j
+        window *= 4
+
+
+def _farthest_upto(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
+                   tangent: FloatArray, normal: FloatArray, centre: FloatArray,
+                   half: FloatArray, tol: float) -> int:
+    """:func:`_farthest` over all candidates ``(i, cap]`` at once."""
     ks = np.arange(i + 1, cap + 1)
     ref = tangent[i + 1] if i + 1 < len(tangent) else tangent[-1]
     c, s = ref[0], ref[1]

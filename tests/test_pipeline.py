@@ -103,3 +103,24 @@ def test_plan_command_errors_are_one_line(tmp_path: Path,
                str(tmp_path / "missing.xml")])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "missing.xml" in err[0]
+
+
+# Routes on Monaco that once failed: lane shapes overlapping at a join (1729#3 -> 1729#4,
+# 1727#1 -> 1727#2-AddedOnRampEdge) and a shortest route ending in a turnaround
+# (-> -1645#2).
+MONACO_ROUTES = [("-756#1", "1729#4"), ("2131#10", "-1645#2"), ("-427882#3", "-1778#0")]
+
+
+def test_monaco_routes_plan_forward(monaco_net) -> None:
+    from splineplan.pipeline import turnarounds
+
+    net = load_network(monaco_net)
+    for a, b in MONACO_ROUTES:
+        result = plan(net, a, b)
+        assert result.route.edges[0] == a and result.route.edges[-1] == b
+        assert turnarounds(net, result.route) == ()
+        cor = result.corridor
+        assert np.all(cor.left - cor.right >= 3.0 - 1e-9)
+        tr = result.trajectory
+        assert np.hypot(np.diff(tr.x), np.diff(tr.y)).max() < 2.0
+        assert tr.s[-1] == pytest.approx(cor.length, rel=0.05)

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
+import shapely
 from shapely import affinity
 from shapely.geometry import Polygon, box
 
@@ -10,6 +12,7 @@ from splineplan.corridor import Corridor
 from splineplan.obstacles import Obstacles
 from splineplan.planner import CorridorPlan, plan_corridor
 from splineplan.roadmap import RoadmapParams
+from splineplan.trajectory import Trajectory
 
 
 def curved_corridor() -> tuple[Corridor, Obstacles]:
@@ -61,3 +64,52 @@ def test_long_curved_corridor_is_continuous_and_feasible() -> None:
         assert not any(fp.intersects(g) for g in grown)
         if ok:
             assert road.contains(fp)
+
+
+def footprint_violations(tr: Trajectory, cor: Corridor, obs: Obstacles, rp: RoadmapParams,
+                         end_room: float = 4.0) -> tuple[int, int]:
+    """Samples whose footprint (shapely) touches an obstacle grown by the margin, and samples
+    (``end_room`` [m] from the corridor's ends) whose footprint leaves the road shrunk by it."""
+    hl, hw = rp.vehicle_length / 2, rp.vehicle_width / 2
+    c, s = np.cos(tr.heading)[:, None], np.sin(tr.heading)[:, None]
+    u, v = np.array([-hl, hl, hl, -hl]), np.array([-hw, -hw, hw, hw])
+    rings = np.stack((tr.x[:, None] + c * u - s * v, tr.y[:, None] + s * u + c * v), axis=-1)
+    feet = shapely.polygons(rings)
+    grown = shapely.union_all([Polygon(p).buffer(rp.safety_margin - 1e-6)
+                               for p in obs.polygons()])
+    road = Polygon(cor.polygon()).buffer(-(rp.safety_margin - 1e-6), join_style=2)
+    st = cor.to_sl(tr.xy)[:, 0]
+    inner = (st > end_room) & (st < cor.length - end_room)
+    return (int(shapely.intersects(feet, grown).sum()),
+            int((~shapely.contains(road, feet[inner])).sum()))
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_one_km_obstacle_field_is_feasible_and_continuous_at_the_joins(seed: int) -> None:
+    """1 km of parked-car rows (the benchmark's density) in 300 m segments: level 2's widest
+    path there zigzags across lanes between rows, and a join can fall into a lane change;
+    the joined curve still keeps the margin (shapely) and is continuous at the joins."""
+    from benchmarks.fields import obstacle_field
+
+    cor, obs, start = obstacle_field(1000.0, 130, seed=seed)
+    rp = RoadmapParams()
+    roadmaps, tr = plan_corridor(cor, obs, start, 0.0, roadmap_params=rp)
+    assert len(roadmaps) == 4
+    assert tr.feasible
+    assert footprint_violations(tr, cor, obs, rp) == (0, 0)
+    assert np.abs(tr.curvature).max() <= 1.0 / 5.0 + 1e-9
+    # each later segment starts on the curve, with the curve's heading and speed there
+    for rm in roadmaps[1:]:
+        d = np.hypot(tr.x - rm.start_xy[0], tr.y - rm.start_xy[1])
+        j = int(np.argmin(d))
+        assert d[j] < 1e-9 and 0 < j < len(tr.x) - 1
+        turn = np.abs(np.diff(np.unwrap(tr.heading[j - 1:j + 2])))
+        assert turn.max() < 0.05
+        assert abs(tr.speed[j + 1] - tr.speed[j - 1]) < 0.5
+    step = np.hypot(np.diff(tr.x), np.diff(tr.y))
+    assert step.max() < 0.6 and step.min() > 0.3
+    # heading changes as the turning limit allows, joins included
+    assert np.all(np.abs(np.diff(np.unwrap(tr.heading))) <= step / 5.0 * 1.05 + 1e-3)
+    dv2 = np.diff(tr.speed**2) / (2 * np.maximum(np.diff(tr.s), 1e-9))
+    assert dv2.max() <= 2.0 + 1e-6 and dv2.min() >= -4.0 - 1e-6
+    assert tr.s[-1] > 990.0 and tr.speed[-1] == 0.0

@@ -97,6 +97,38 @@ def test_lengths_equal_sumolib_monaco_many(monaco_net: Path) -> None:
     assert _compare(net, sn, "bus", 500, seed=13) > 0
 
 
+def test_routes_without_turnarounds_monaco(monaco_net: Path) -> None:
+    """``turnarounds=False``: valid, no turnaround step, and no shorter than the optimum;
+    equal to it wherever the optimum has no turnaround."""
+    net, sn = _nets(monaco_net)
+    rng = random.Random(5)
+    usable = [e for e in net.edge_ids if net.allows(e, "passenger")]
+    differed = 0
+    for _ in range(150):
+        a, b = rng.choice(usable), rng.choice(usable)
+        try:
+            best = shortest_route(net, a, b)
+        except NoRouteError:
+            continue
+        has_t = any({c.getDirection() for c in sn.getEdge(e).getConnections(sn.getEdge(f))}
+                    == {"t"} for e, f in itertools.pairwise(best.edges))
+        try:
+            forward = shortest_route(net, a, b, turnarounds=False)
+        except NoRouteError as err:  # only where the optimum itself must turn around
+            assert has_t and "without turnarounds" in str(err)
+            continue
+        assert validate(sn, forward) == pytest.approx(forward.length, rel=1e-9, abs=1e-6)
+        steps = list(itertools.pairwise(forward.edges))
+        for e, f in steps:  # sumolib's own word on each step's connections
+            dirs = {c.getDirection() for c in sn.getEdge(e).getConnections(sn.getEdge(f))}
+            assert dirs != {"t"}, (a, b, e, f)
+        assert forward.length >= best.length - 1e-6
+        if not has_t:
+            assert forward.length == pytest.approx(best.length, rel=1e-9)
+        differed += has_t
+    assert differed > 0  # the sample exercised routes that turn around
+
+
 @pytest.mark.parametrize("name", ["grid.net.xml", "city.net.xml"])
 def test_time_weight_equals_sumolib_fastest(name: str) -> None:
     net, sn = _nets(NETS / name)

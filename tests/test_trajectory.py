@@ -384,7 +384,7 @@ def test_band_simplification_keeps_every_segment_in_the_bands(rho: float) -> Non
 
 
 @pytest.mark.parametrize(("n_obs", "seed"), [(20, s) for s in range(5)]
-                         + [(40, s) for s in range(6)])
+                         + [(40, s) for s in range(8)])
 def test_benchmark_fields_are_feasible(n_obs: int, seed: int) -> None:
     """The benchmark's fields (each keeps a drivable passage for the car) end feasible."""
     from benchmarks.fields import obstacle_field
@@ -393,6 +393,31 @@ def test_benchmark_fields_are_feasible(n_obs: int, seed: int) -> None:
     rm, tr = real_plan(corridor, obstacles, start)
     assert tr.feasible
     assert tr.iterations.control_points < 60
+    assert shapely_check_corridor(tr, corridor, obstacles, rm.params) == (0, 0)
+
+
+def test_detour_where_level_2_zigzags_across_lanes() -> None:
+    """Seed 6: level 2's widest path crosses two lanes within a 6 m gap between rows, which
+    no curve within the turning limit follows; the detour through the same graph does."""
+    from benchmarks.fields import obstacle_field
+    from splineplan.trajectory import detour_roadmap
+
+    corridor, obstacles, start = obstacle_field(300, 40, 9.6, 6)
+    rm, tr = real_plan(corridor, obstacles, start)
+    assert tr.feasible
+    direct = plan_trajectory(rm, corridor, obstacles, TrajectoryParams(detour_rate=0.0), 0.0)
+    assert not direct.feasible
+    jumps = np.abs(np.diff(rm.l)) / np.diff(rm.s)
+    assert jumps.max() > 2.0
+    detour = detour_roadmap(rm, corridor, 0.4)
+    assert detour is not None
+    assert np.abs(np.diff(detour.l)).max() <= 0.4 * rm.params.d + 1e-9
+    # the detour runs through the graph: its vertices, their intervals, and its arcs
+    assert np.all(detour.l >= rm.graph_lo[detour.path] - 1e-9)
+    assert np.all(detour.l <= rm.graph_hi[detour.path] + 1e-9)
+    arcs = {tuple(a) for a in rm.arcs.tolist()}
+    assert all((int(a), int(b)) in arcs for a, b in zip(detour.path[:-1], detour.path[1:],
+                                                         strict=True))
     assert shapely_check_corridor(tr, corridor, obstacles, rm.params) == (0, 0)
 
 
