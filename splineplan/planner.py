@@ -145,8 +145,8 @@ def plan_corridor(
                 t_roadmap += t1 - t0
                 t_traj += t2 - t1
             tried.append((cut, rm, tr))
-            if tr.feasible:
-                break
+            if tr.feasible or not _fails_near_start(tr, overlap, tp.kappa_max):
+                break  # another join moves only the start: it cannot mend a failure further on
             log.debug("segment at %.1f m infeasible from join %d", seg.offset, attempt)
         # the first feasible attempt, else the one from the best join
         cut, rm, tr = tried[-1] if tried[-1][2].feasible else tried[0]
@@ -160,6 +160,15 @@ def plan_corridor(
     joined = _join(parts, tp, start_speed, end_speed)
     t_traj += time.perf_counter() - t3
     return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
+
+
+def _fails_near_start(tr: Trajectory, reach: float, kappa_max: float) -> bool:
+    """Whether the trajectory's first infeasible sample lies within ``reach`` [m] of its
+    start (curvature over ``kappa_max`` [1/m], or the footprint within the margin)."""
+    bad = ((np.abs(tr.curvature) > kappa_max) | (tr.clearance_obstacles < tr.safety_margin)
+           | (tr.clearance_road < tr.safety_margin))
+    hits = np.flatnonzero(bad)
+    return bool(len(hits)) and float(tr.s[hits[0]] - tr.s[0]) <= reach
 
 
 def cut_stations(corridor: Corridor, length: float, overlap: float

@@ -665,7 +665,7 @@ def plan_trajectory(
         raise TrajectoryError(f"start speed must be >= 0, got {start_speed!r}")
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                       end_speed)
-    if traj.feasible or params.detour_rate <= 0:
+    if traj.feasible or params.detour_rate <= 0 or not _steep(roadmap, params.detour_rate):
         return traj
     detour = detour_roadmap(roadmap, corridor, params.detour_rate)
     if detour is None:
@@ -674,6 +674,14 @@ def plan_trajectory(
                        end_speed)
     log.debug("level 2's path gives no feasible curve; detour feasible: %s", other.feasible)
     return other if other.feasible else traj
+
+
+def _steep(roadmap: Roadmap, rate: float) -> bool:
+    """Whether level 2's path changes its lateral offset faster than ``rate`` somewhere
+    (only then can :func:`detour_roadmap` find a path a curve follows better)."""
+    ds = np.diff(np.asarray(roadmap.s, dtype=float))
+    dl = np.abs(np.diff(np.asarray(roadmap.l, dtype=float)))
+    return bool(np.any(dl > rate * np.maximum(ds, 1e-9) + 1e-9))
 
 
 def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
