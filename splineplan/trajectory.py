@@ -56,6 +56,7 @@ import logging
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
@@ -537,8 +538,16 @@ def _rect_polygon_distance(centers: FloatArray, headings: FloatArray, hl: float,
     inv = 1.0 / np.where(seg2 > 0, seg2, 1.0)
     cu, cv = hl * _CORNERS[:, 0, None], hw * _CORNERS[:, 1, None]
     wu, wv = cu - u[:, None, :], cv - v[:, None, :]
-    t = ((wu * du[:, None, :] + wv * dvv[:, None, :]) * inv[:, None, :]).clip(0.0, 1.0)
-    best = np.hypot(t * du[:, None, :] - wu, t * dvv[:, None, :] - wv).min(axis=(1, 2))
+    du3, dv3 = du[:, None, :], dvv[:, None, :]
+    t = wu * du3  # in place from here: the arrays are the largest of the check
+    t += wv * dv3
+    t *= inv[:, None, :]
+    np.clip(t, 0.0, 1.0, out=t)
+    gu = t * du3
+    gu -= wu
+    t *= dv3
+    t -= wv
+    best = np.hypot(gu, t, out=gu).min(axis=(1, 2))
     # polygon edges crossing the rectangle (Liang-Barsky clipping)
     t_in = np.zeros_like(u)
     t_out = np.ones_like(u)
@@ -993,21 +1002,23 @@ def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, norm
     Increasing indices, with the first and the last vertex.
     """
     pts = np.asarray(points, dtype=float)
-    arrays = tuple(np.asarray(a, dtype=float) for a in (origin, tangent, normal, centre, half))
+    org, tan, nrm, cen, hlf = (np.asarray(a, dtype=float)
+                               for a in (origin, tangent, normal, centre, half))
     m = len(pts)
     if m <= 2:
         return np.arange(m, dtype=np.int64)
     kept = [0]
     i = 0
+    ends = _band_ends(pts, org, nrm, cen, hlf)
     while i < m - 1:
-        i = _farthest(pts[i], i, m - 1, pts, *arrays)  # type: ignore[arg-type]
+        i = _farthest(pts[i], i, m - 1, pts, org, tan, nrm, cen, hlf, ends=ends)
         kept.append(i)
     return np.asarray(kept, dtype=np.int64)
 
 
 def _farthest(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
               tangent: FloatArray, normal: FloatArray, centre: FloatArray, half: FloatArray,
-              tol: float = 1e-9) -> int:
+              tol: float = 1e-9, ends: FloatArray | None = None) -> int:
     """Largest ``j`` in ``(i, cap]`` (at least ``i + 1``) such that every segment
     ``p -> pts[j']``, ``i < j' <= j``, crosses the lines ``i < k < j'`` inside their bands.
 
@@ -1022,29 +1033,38 @@ def _farthest(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArr
     # the test is a running one: a window of candidates gives the same answer as all of
     # them unless every candidate in it passes, then a window four times as long
     window = 32
+    if ends is None:
+        ends = _band_ends(pts, origin, normal, centre, half)
     while True:
         end = min(cap, i + window)
-        j = _farthest_upto(p, i, end, pts, origin, tangent, normal, centre, half, tol)
+        j = _farthest_upto(p, i, end, pts, origin, tangent, normal, centre, half, tol, ends)
         if j < end or end == cap:
             return j
         window *= 4
 
 
+def _band_ends(pts: FloatArray, origin: FloatArray, normal: FloatArray, centre: FloatArray,
+               half: FloatArray) -> FloatArray:
+    """Per vertex ``(m, 3, 2)``: the lower and the upper end of its band, and the vertex."""
+    return np.stack((origin + (centre - half)[:, None] * normal,
+                     origin + (centre + half)[:, None] * normal, pts), axis=1)
+
+
 def _farthest_upto(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
                    tangent: FloatArray, normal: FloatArray, centre: FloatArray,
-                   half: FloatArray, tol: float) -> int:
-    """:func:`_farthest` over all candidates ``(i, cap]`` at once."""
-    ks = np.arange(i + 1, cap + 1)
+                   half: FloatArray, tol: float, ends: FloatArray | None = None) -> int:
+    """:func:`_farthest` over all candidates ``(i, cap]`` at once (``ends``: the
+    :func:`_band_ends` of all vertices, computed here if ``None``)."""
+    ks = slice(i + 1, cap + 1)
     ref = tangent[i + 1] if i + 1 < len(tangent) else tangent[-1]
     c, s = ref[0], ref[1]
-
-    def angle(q: FloatArray) -> FloatArray:
-        dx, dy = q[:, 0] - p[0], q[:, 1] - p[1]
-        return np.arctan2(-dx * s + dy * c, dx * c + dy * s)
-
-    ends_lo = origin[ks] + (centre[ks] - half[ks])[:, None] * normal[ks]
-    ends_hi = origin[ks] + (centre[ks] + half[ks])[:, None] * normal[ks]
-    a1, a2 = angle(ends_lo), angle(ends_hi)
+    if ends is None:
+        ends = _band_ends(pts, origin, normal, centre, half)
+    # directions (relative to the road's) from p to both band ends and to the vertex
+    q = ends[ks]
+    dx, dy = q[..., 0] - p[0], q[..., 1] - p[1]
+    ang = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+    a1, a2, th = ang[:, 0], ang[:, 1], ang[:, 2]
     lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
     # a line through p itself does not constrain the direction
     on = np.abs(np.einsum("kd,kd->k", origin[ks] - p, tangent[ks])) < 1e-9
@@ -1052,7 +1072,6 @@ def _farthest_upto(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: Flo
     # bounds from the lines strictly before each candidate
     low = np.maximum.accumulate(np.concatenate(([-np.inf], lo[:-1])))
     high = np.minimum.accumulate(np.concatenate(([np.inf], hi[:-1])))
-    th = angle(pts[ks])
     good = (th >= low - tol) & (th <= high + tol)
     good[0] = True
     if good.all():
@@ -1087,11 +1106,13 @@ class _Curve:
         # lengthen a leg beyond the longest of its neighbours
         legs = np.hypot(*np.diff(ctrl, axis=0).T)
         padded = np.concatenate(([legs[0]], legs, [legs[-1]]))
-        span_len = np.array([padded[j:j + k + 2].max() for j in range(n - k)])
+        span_len = sliding_window_view(padded, k + 2)[:n - k].max(axis=1)
         per = np.clip(np.ceil(span_len / spacing).astype(int) + 1, 2, 400)
         inner = knots[k:n + 1]
-        u = np.concatenate([np.linspace(inner[j], inner[j + 1], per[j], endpoint=False)
-                            for j in range(n - k)] + [np.array([1.0])])
+        # per span, evenly spaced from its start (as np.linspace without the end point)
+        step = np.repeat(np.diff(inner) / per, per)
+        within = np.arange(int(per.sum())) - np.repeat(np.cumsum(per) - per, per)
+        u = np.concatenate((within * step + np.repeat(inner[:-1], per), [1.0]))
         first, basis = _basis(u, knots, k, n)
         return cls(ctrl, pool_index, knots, k, u, first, basis)
 
