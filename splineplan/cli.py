@@ -16,9 +16,6 @@ from typing import NoReturn
 from splineplan import __version__
 from splineplan.errors import SplineplanError
 
-Command = Callable[[argparse.Namespace], int]
-
-
 # ---- commands (one _add_/_cmd_ pair each; keep them in this order) ----------------------
 
 def _add_route(sub: argparse._SubParsersAction) -> None:
@@ -126,7 +123,9 @@ def _cmd_plan_image(args: argparse.Namespace) -> int:
                     "scale": amap.scale, "threshold": args.threshold,
                     "start": plan.start, "goal": plan.goal})
     if not args.no_plot:
-        _plot_plan_folder(out, out)
+        from splineplan.plot import plot_plan_folder
+
+        plot_plan_folder(out)
     h, w = amap.shape
     print(f"map {args.map}: {w} x {h} pixels, {w * amap.scale:.1f} x {h * amap.scale:.1f} m, "
           f"{amap.n_blobs} obstacles ({len(amap.obstacles)} rectangles)")
@@ -144,33 +143,6 @@ def _cmd_plan_image(args: argparse.Namespace) -> int:
         print(f"splineplan plan-image: warning: the trajectory is not feasible: {why}",
               file=sys.stderr)
     return 0
-
-
-def _plot_plan_folder(run_dir: object, out: object, fmt: str = "png") -> list[str]:
-    """Draw Fig. 2, Fig. 4 and the speed profile of a plan folder; returns the files."""
-    from pathlib import Path
-
-    from splineplan.io import load_plan
-    from splineplan.plot import plot_roadmap, plot_speed_profile, plot_trajectory
-    from splineplan.trajectory import TrajectoryParams
-
-    saved = load_plan(Path(str(run_dir)))
-    dest = Path(str(out))
-    written = []
-    if saved.roadmaps:
-        p = dest / f"roadmap.{fmt}"
-        plot_roadmap(saved.roadmaps, saved.corridor, saved.obstacles, path=p)
-        written.append(str(p))
-    if saved.trajectory is not None:
-        p = dest / f"trajectory.{fmt}"
-        plot_trajectory(saved.trajectory, saved.corridor, saved.obstacles,
-                        saved.roadmaps or None, path=p, footprint_every=10.0)
-        written.append(str(p))
-        p = dest / f"speed.{fmt}"
-        plot_speed_profile(saved.trajectory, saved.trajectory_params or TrajectoryParams(),
-                           path=p)
-        written.append(str(p))
-    return written
 
 
 def _add_plot(sub: argparse._SubParsersAction) -> None:
@@ -194,11 +166,11 @@ def _cmd_plot(args: argparse.Namespace) -> int:
 
     run = Path(args.run_dir)
     out = Path(args.out) if args.out else run
-    if (run / "plan.json").exists():
-        written = _plot_plan_folder(run, out, args.format)
-    elif (run / "metrics.json").exists():
-        from splineplan.plot import plot_run_folder
+    from splineplan.plot import plot_plan_folder, plot_run_folder
 
+    if (run / "plan.json").exists():
+        written = plot_plan_folder(run, out_dir=out, fmt=args.format)
+    elif (run / "metrics.json").exists():
         written = plot_run_folder(run, out_dir=out, fmt=args.format)
     else:
         raise ScenarioError(f"{run} holds neither plan.json nor metrics.json")

@@ -576,15 +576,6 @@ def _limit_to_curvature(probe: Corridor, left: FloatArray, right: FloatArray
 REFERENCE_SMOOTHING = 2.0
 
 
-def _vertex_normals(points: FloatArray) -> FloatArray:
-    """Unit left normals ``(n, 2)`` at a polyline's vertices (mean of adjacent segments)."""
-    d = np.diff(points, axis=0)
-    d /= np.hypot(*d.T)[:, None]
-    t = np.concatenate((d[:1], d[:-1] + d[1:], d[-1:]))
-    t /= np.maximum(np.hypot(*t.T), 1e-12)[:, None]
-    return np.column_stack((-t[:, 1], t[:, 0]))
-
-
 def _smooth_polyline(points: FloatArray, sigma: float) -> FloatArray:
     """Polyline resampled every 0.5 m and smoothed by a Gaussian of ``sigma`` [m].
 

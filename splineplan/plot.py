@@ -397,6 +397,39 @@ def _param(params: Any, name: str) -> float:
     return float(value)
 
 
+def plot_plan_folder(
+    run_dir: str | PathLike[str],
+    *,
+    out_dir: str | PathLike[str] | None = None,
+    fmt: str = "png",
+) -> list[str]:
+    """Figures of a plan folder (``plan.json``, see :mod:`splineplan.io`).
+
+    Writes ``roadmap.<fmt>`` (Fig. 2), ``trajectory.<fmt>`` (Fig. 4) and ``speed.<fmt>``
+    (the speed profile with its limits). Returns the files written.
+    """
+    from splineplan.io import load_plan
+    from splineplan.trajectory import TrajectoryParams
+
+    saved = load_plan(Path(run_dir))
+    dest = Path(out_dir) if out_dir is not None else Path(run_dir)
+    written: list[str] = []
+    if saved.roadmaps:
+        p = dest / f"roadmap.{fmt}"
+        plot_roadmap(saved.roadmaps, saved.corridor, saved.obstacles, path=p)
+        written.append(str(p))
+    if saved.trajectory is not None:
+        p = dest / f"trajectory.{fmt}"
+        plot_trajectory(saved.trajectory, saved.corridor, saved.obstacles,
+                        saved.roadmaps or None, path=p, footprint_every=10.0)
+        written.append(str(p))
+        p = dest / f"speed.{fmt}"
+        plot_speed_profile(saved.trajectory, saved.trajectory_params or TrajectoryParams(),
+                           path=p)
+        written.append(str(p))
+    return written
+
+
 def plot_run_folder(
     run_dir: str | PathLike[str],
     *,

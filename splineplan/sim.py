@@ -64,7 +64,7 @@ from splineplan.errors import (
     TrajectoryError,
     VehicleClassError,
 )
-from splineplan.geometry import FloatArray, heading_from_sumo_angle
+from splineplan.geometry import FloatArray, heading_from_sumo_angle, sumo_angle_from_heading
 from splineplan.metrics import (
     CURVATURE_SPAN,
     dynamics,
@@ -372,7 +372,6 @@ class _Run:
         self._obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]] = {}
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.traffic_after = 0.0  # no traffic replan before this time [s]
-        self.planned_moving: tuple[str, ...] = ()  # beside vehicles the plan went around
         self.others = _NO_OTHERS
         self._beside_at: tuple[float, float] | None = None
         self._turn_key: tuple[Corridor, float] | None = None
@@ -672,7 +671,7 @@ class _Run:
             self.position_errors.append(pos_err)
             self.deviation = pos_err
         else:
-            h = math.radians(90.0 - st[c.VAR_ANGLE])
+            h = float(heading_from_sumo_angle(st[c.VAR_ANGLE]))
             x, y = fx - half * math.cos(h), fy - half * math.sin(h)
             self.pose = np.array([x, y, h])
             self.v = float(st[c.VAR_SPEED])
@@ -922,11 +921,9 @@ class _Run:
         if len(moving):
             ok, err = self._plan_among(obstacles, moving)
             if ok:
-                self.planned_moving = moving.ids
                 return ok, err
             log.debug("t=%.1f no plan around the traffic beside the ego (%s): planning "
                       "among the stopped obstacles only", self.time, err)
-        self.planned_moving = ()
         return self._plan_among(obstacles, None)
 
     def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None
@@ -1231,7 +1228,7 @@ class _Run:
         x, y, h = self.pose
         fx = x + ego.length / 2.0 * math.cos(h)
         fy = y + ego.length / 2.0 * math.sin(h)
-        angle = (90.0 - math.degrees(h)) % 360.0  # geometry.sumo_angle_from_heading
+        angle = float(sumo_angle_from_heading(h))
         assert self.corridor is not None
         edge = self.corridor.edge_at(self.station) or ""
         lane = _lane_index(self.last_lane)
@@ -1591,7 +1588,7 @@ class _Others:
         self.ids = ids
         self.n = len(ids)
         self.front = a[:, :2]
-        self.head = np.radians(90.0 - a[:, 2])
+        self.head = heading_from_sumo_angle(a[:, 2])
         self.cos = np.cos(self.head)
         self.sin = np.sin(self.head)
         self.length = a[:, 3]

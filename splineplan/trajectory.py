@@ -121,23 +121,8 @@ class TrajectoryParams:
         The lead-in: roadmap vertices closer ahead of the vehicle than
         ``max(lead_in_lengths * vehicle_length, lead_in_time * start_speed)`` [m] are not
         control points at first, so that a lateral offset is taken over that distance.
-    lateral_rate
-        Largest lateral change [m per m of station] that the control points' tube allows
-        (:func:`lateral_tube`): where the roadmap steps sideways faster (a width step at a
-        junction entry, a lane change between parked cars), the step is spread over
-        ``step / lateral_rate`` metres ahead of it. 0 (the default) leaves the roadmap's
-        intervals as they are: 0.15 removes the corner cut at width steps of empty
-        junction entries, but among parked cars it moves control points into places where
-        the first curve is not clear, so it is off until that is resolved.
     band_reserve
         Room [m] that each band leaves to its free interval's ends on each side.
-    road_lateral_rate
-        Largest lateral change [m per m of station] of the control points where the road's
-        own width steps (:func:`road_tube`: a two-lane edge into a one-lane junction
-        stretch): the step is taken over ``step / road_lateral_rate`` metres before it.
-        0 (the default) leaves the steps as they are: 0.15 moves the curve into a
-        junction's lane ahead of it, but in the closed loop among moving traffic it took
-        the ego across its road beside a passing car, so it is off.
     detour_rate
         Largest lateral change [m per m of station] of the detour path
         (:func:`detour_roadmap`) tried when the curve along level 2's path is not
@@ -158,9 +143,7 @@ class TrajectoryParams:
     repair_rounds: int = 6
     lead_in_lengths: float = 2.0
     lead_in_time: float = 1.5
-    lateral_rate: float = 0.0
     band_reserve: float = 0.15
-    road_lateral_rate: float = 0.0
     patience: int = 12
     detour_rate: float = 0.4
 
@@ -179,8 +162,7 @@ class TrajectoryParams:
                 and 0.0 <= self.band_fraction <= 1.0):
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
-        for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "lateral_rate",
-                     "road_lateral_rate", "detour_rate"):
+        for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "detour_rate"):
             value = getattr(self, name)
             if not (isinstance(value, int | float | np.floating | np.integer)
                     and np.isfinite(value) and value >= 0):
@@ -750,10 +732,9 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if reach <= 1e-6:
         raise TrajectoryError("the roadmap ends at or behind the vehicle: no curve to follow")
     lines = _vertex_lines(roadmap, corridor, distinct, sl[1:], params.band_fraction,
-                          params.band_reserve, params.lateral_rate,
-                          params.road_lateral_rate)
+                          params.band_reserve)
     # the control points stand at the bands' centres (the roadmap vertices, except where
-    # the lateral tube moved them)
+    # the band reserve moved them off an interval's end)
     moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
     pts = pts.copy()
     pts[moved] = lines[0][moved] + lines[3][moved, None] * lines[2][moved]
@@ -893,16 +874,14 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
 
 
 def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.bool_],
-                  sl: FloatArray, band_fraction: float, band_reserve: float = 0.0,
-                  lateral_rate: float = np.inf, road_rate: float = 0.0
+                  sl: FloatArray, band_fraction: float, band_reserve: float = 0.0
                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
     """Each roadmap vertex's sweep line and band: origin ``(m, 2)`` (lateral offset 0),
     tangent ``(m, 2)``, normal ``(m, 2)``, band centre ``(m,)`` [m] and half width ``(m,)`` [m].
 
-    The vertices' free intervals are first narrowed by :func:`lateral_tube`; each vertex
-    moves into its narrowed interval (and ``band_reserve`` [m] off its ends, where it is
-    wide enough), which is where the band is centred; the band spans ``band_fraction`` of
-    the free interval, within the narrowed interval less ``band_reserve`` [m] on each side
+    Each vertex moves ``band_reserve`` [m] off its free interval's ends (where the interval
+    is wide enough), which is where the band is centred; the band spans ``band_fraction``
+    of the free interval, within the interval less ``band_reserve`` [m] on each side
     (room for the footprint's turn away from the road's heading). Without free
     intervals (a roadmap without its graph) the bands are empty and centred on the vertices.
     """
@@ -915,74 +894,15 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
     if len(path) == len(distinct) and len(roadmap.graph_lo) and len(roadmap.graph_hi):
         lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
         hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
-        tlo, thi = lateral_tube(s, lo, hi, lateral_rate)
-        if road_rate > 0:  # the road's own width steps, taken gradually
-            rlo, rhi = road_tube(corridor, s, roadmap.params, road_rate)
-            nlo, nhi = np.maximum(tlo, rlo), np.minimum(thi, rhi)
-            fits = nlo <= nhi
-            tlo, thi = np.where(fits, nlo, tlo), np.where(fits, nhi, thi)
-        # the vertex, moved into the tube (and off its ends by the reserve where it can)
-        q = np.minimum(band_reserve, (thi - tlo) / 2.0)
-        centre = np.clip(sl[:, 1], tlo + q, thi - q)
-        room = np.minimum(centre - tlo, thi - centre)
+        # the vertex, moved off its interval's ends by the reserve where it can
+        q = np.minimum(band_reserve, (hi - lo) / 2.0)
+        centre = np.clip(sl[:, 1], lo + q, hi - q)
+        room = np.minimum(centre - lo, hi - centre)
         half = np.clip(np.minimum(band_fraction * np.maximum(hi - lo, 0.0) / 2.0,
                                   room - band_reserve), 0.0, None)
     else:
         centre, half = sl[:, 1], np.zeros(len(s))
     return origin, tangent, normal, centre, half
-
-
-def road_tube(corridor: Corridor, s: ArrayLike, params: RoadmapParams, rate: float
-              ) -> tuple[FloatArray, FloatArray]:
-    """Lateral offsets ``lo, hi`` ``(m,)`` [m] at stations ``s`` where the vehicle's centre keeps
-    the inflation distance from the road edges over its whole length (the road shrunk by
-    ``inflation``, narrowest within ``vehicle_length / 2`` ahead and behind), narrowed by
-    :func:`lateral_tube` at ``rate`` so that a width step is approached gradually. Where
-    nothing is left (a tight turn), the middle."""
-    st = np.asarray(s, dtype=float)
-    step = 0.5
-    grid = np.minimum(np.arange(0.0, corridor.length + step, step), corridor.length)
-    right, left = corridor.bounds_at(grid)
-    size = 2 * int(np.ceil(params.vehicle_length / 2.0 / step)) + 1
-    r = params.inflation
-    lo = np.interp(st, grid, maximum_filter1d(right + r, size, mode="nearest"))
-    hi = np.interp(st, grid, minimum_filter1d(left - r, size, mode="nearest"))
-    mid = (lo + hi) / 2.0
-    return lateral_tube(st, np.minimum(lo, mid), np.maximum(hi, mid), rate)
-
-
-def lateral_tube(s: ArrayLike, lo: ArrayLike, hi: ArrayLike, rate: float
-                 ) -> tuple[FloatArray, FloatArray]:
-    """Free intervals ``[lo, hi]`` [m] at stations ``s`` ``(m,)`` [m] narrowed to the lateral
-    offsets from which a path whose offset changes by at most ``rate`` per metre of station
-    reaches every interval before and after (a backward, then a forward pass).
-
-    Where the intervals jump faster than that (the roadmap steps across within a few sweep
-    lines), the tube tapers towards the jump over ``jump / rate`` metres, so that the
-    lateral move is taken over that distance instead of at the last line. Where no path
-    at that rate exists (a slalom tighter than it), the rate is doubled, up to three times;
-    then, or with ``rate <= 0``, the intervals are returned unchanged.
-    """
-    st = np.asarray(s, dtype=float)
-    lo0, hi0 = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
-    if not (np.isfinite(rate) and rate > 0):
-        return lo0.copy(), hi0.copy()
-    ds = np.abs(np.diff(st))
-    for attempt in range(4):
-        a, b = lo0.tolist(), hi0.tolist()
-        reach = (rate * 2.0**attempt * ds).tolist()
-        ok = True
-        for k in range(len(st) - 2, -1, -1):  # backward: can reach what follows
-            a[k] = max(a[k], a[k + 1] - reach[k])
-            b[k] = min(b[k], b[k + 1] + reach[k])
-            ok = ok and a[k] <= b[k]
-        for k in range(1, len(st)):  # forward: can be reached from what precedes
-            a[k] = max(a[k], a[k - 1] - reach[k - 1])
-            b[k] = min(b[k], b[k - 1] + reach[k - 1])
-            ok = ok and a[k] <= b[k]
-        if ok:
-            return np.asarray(a), np.asarray(b)
-    return lo0.copy(), hi0.copy()
 
 
 def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, normal: ArrayLike,

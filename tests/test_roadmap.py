@@ -317,10 +317,14 @@ def check_against_oracle(seed: int, kind: str, count: int, d: float, wmax: float
         np.testing.assert_allclose(rm.passage_xy, rm.xy)
 
 
+#: Random obstacle fields for the oracle tests: seed, road shape, obstacle count, d, wmax.
+FIELDS = dict(seed=st.integers(0, 10**6), kind=st.sampled_from(["straight", "left", "right"]),
+              count=st.integers(0, 16), d=st.sampled_from([0.5, 1.0, 2.0]),
+              wmax=st.sampled_from([1.0, 3.5, 100.0]))
+
+
 @settings(max_examples=30, deadline=None)
-@given(seed=st.integers(0, 10**6), kind=st.sampled_from(["straight", "left", "right"]),
-       count=st.integers(0, 16), d=st.sampled_from([0.5, 1.0, 2.0]),
-       wmax=st.sampled_from([1.0, 3.5, 100.0]))
+@given(**FIELDS)
 def test_roadmap_agrees_with_raster_oracle(seed: int, kind: str, count: int, d: float,
                                            wmax: float) -> None:
     check_against_oracle(seed, kind, count, d, wmax)
@@ -328,9 +332,7 @@ def test_roadmap_agrees_with_raster_oracle(seed: int, kind: str, count: int, d: 
 
 @pytest.mark.slow
 @settings(max_examples=600, deadline=None)
-@given(seed=st.integers(0, 10**6), kind=st.sampled_from(["straight", "left", "right"]),
-       count=st.integers(0, 16), d=st.sampled_from([0.5, 1.0, 2.0]),
-       wmax=st.sampled_from([1.0, 3.5, 100.0]))
+@given(**FIELDS)
 def test_roadmap_agrees_with_raster_oracle_long(seed: int, kind: str, count: int, d: float,
                                                 wmax: float) -> None:
     check_against_oracle(seed, kind, count, d, wmax)
