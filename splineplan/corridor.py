@@ -51,6 +51,8 @@ class Corridor:
     offset: float = 0.0
     _tree: cKDTree = field(init=False, repr=False)
     _heading: FloatArray = field(init=False, repr=False)
+    _cos: FloatArray = field(init=False, repr=False)
+    _sin: FloatArray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if len(self.reference) < 2 or self.s[-1] <= 0:
@@ -66,6 +68,8 @@ class Corridor:
             getattr(self, name).setflags(write=False)
         d = np.diff(self.reference, axis=0)
         object.__setattr__(self, "_heading", np.arctan2(d[:, 1], d[:, 0]))
+        object.__setattr__(self, "_cos", np.cos(self._heading))
+        object.__setattr__(self, "_sin", np.sin(self._heading))
         object.__setattr__(self, "_tree", cKDTree(self.reference))
 
     # -- construction -------------------------------------------------------------------
@@ -150,11 +154,11 @@ class Corridor:
         """Points ``(n, 2)`` [m] at stations ``s`` and lateral offsets ``l``."""
         s_arr, l_arr = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(l, dtype=float))
         i = self._segment_index(s_arr)
-        h = self._heading[i]
+        c, sn = self._cos[i], self._sin[i]
         t = s_arr - self.s[i]
         base = self.reference[i]
-        x = base[..., 0] + t * np.cos(h) - l_arr * np.sin(h)
-        y = base[..., 1] + t * np.sin(h) + l_arr * np.cos(h)
+        x = base[..., 0] + t * c - l_arr * sn
+        y = base[..., 1] + t * sn + l_arr * c
         return np.stack((x, y), axis=-1)
 
     def to_sl(self, xy: ArrayLike) -> FloatArray:
@@ -170,16 +174,16 @@ class Corridor:
         best_l = np.empty(len(pts))
         best_d = np.full(len(pts), np.inf)
         for cand in (k - 1, k):
-            i = np.clip(cand, 0, nseg - 1)
-            h = self._heading[i]
+            i = np.minimum(np.maximum(cand, 0), nseg - 1)
+            c, s = self._cos[i], self._sin[i]
             dx = pts[:, 0] - self.reference[i, 0]
             dy = pts[:, 1] - self.reference[i, 1]
-            along = dx * np.cos(h) + dy * np.sin(h)
-            lat = -dx * np.sin(h) + dy * np.cos(h)
+            along = dx * c + dy * s
+            lat = -dx * s + dy * c
             seg_len = self.s[i + 1] - self.s[i]
             lo = np.where(i == 0, -np.inf, 0.0)
             hi = np.where(i == nseg - 1, np.inf, seg_len)
-            t = np.clip(along, lo, hi)
+            t = np.minimum(np.maximum(along, lo), hi)
             dist = np.hypot(along - t, lat)
             better = dist < best_d
             best_d = np.where(better, dist, best_d)
@@ -244,8 +248,9 @@ class Corridor:
 
     # -- helpers ------------------------------------------------------------------------
     def _segment_index(self, s: np.ndarray) -> np.ndarray:
-        i = np.searchsorted(self.s, s, side="right") - 1
-        return np.clip(i, 0, len(self.s) - 2)
+        # the segment holding each station, the end segments beyond the ends (searching
+        # the inner stations gives 0 .. len(s) - 2 directly)
+        return np.searchsorted(self.s[1:-1], s, side="right")
 
     def _offsets_of(self, boundary: FloatArray) -> FloatArray:
         sl = self.to_sl(boundary)

@@ -7,6 +7,8 @@ clockwise from north and are converted only here.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -21,6 +23,12 @@ def heading_from_sumo_angle(angle_deg: ArrayLike) -> FloatArray:
 def sumo_angle_from_heading(heading: ArrayLike) -> FloatArray:
     """SUMO's angle [deg, 0 = north, clockwise, in [0, 360)] from a heading [rad]."""
     return np.asarray(np.mod(90.0 - np.degrees(np.asarray(heading, dtype=float)), 360.0))
+
+
+def sumo_angle_from_heading_scalar(heading: float) -> float:
+    """:func:`sumo_angle_from_heading` of one heading [rad], with plain floats (the same
+    value, without array set-up)."""
+    return (90.0 - math.degrees(heading)) % 360.0
 
 
 def wrap_angle(angle: ArrayLike) -> FloatArray:

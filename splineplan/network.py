@@ -412,9 +412,12 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
 
     On each route edge the area spans from the right side of its rightmost lane that
     ``vclass`` may use to the left side of its leftmost such lane (lanes between them
-    count as drivable). Through a junction it spans the internal lanes of the allowed
-    connections to the next route edge, from the rightmost to the leftmost. The reference
-    line runs midway between those two boundaries. Junction stretches count towards the
+    count as drivable). Through a junction it spans from those lanes to the allowed lanes
+    of the next route edge, each side a kerb curve rounded as SUMO rounds a junction's
+    corners (:func:`_junction_band`), so that a turn has the room of both roads and not
+    only of one internal lane; where the turn is too sharp for that, it spans the internal
+    lanes of the allowed connections, from the rightmost to the leftmost. The reference
+    line runs midway between the two boundaries. Junction stretches count towards the
     edge before them in ``edge_at``. The corridor covers the whole first edge (also when
     the route starts at ``start_pos > 0``).
 
@@ -443,6 +446,11 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
                      if c.via]
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
+            nxt = [ln for ln in network.lanes_of(edges[i + 1]) if ln.allows(cls)]
+            fillet = _junction_band(lanes, nxt) if nxt else None
+            if fillet is not None:
+                pieces.append(fillet)
+                continue
             conns.sort(key=lambda c: (c.from_lane, c.to_lane))
             right, left = conns[0], conns[-1]
             rshape = _via_shape(network, right.via)
@@ -589,6 +597,71 @@ def _smooth_polyline(points: FloatArray, sigma: float) -> FloatArray:
     out = gaussian_filter1d(pts, sigma / 0.5, axis=0, mode="nearest")
     out[0], out[-1] = pts[0], pts[-1]
     return out
+
+
+#: Largest heading change [rad] through a junction that :func:`_junction_band` rounds.
+MAX_FILLET_TURN = np.deg2rad(150.0)
+
+
+def _junction_band(incoming: list[Lane], outgoing: list[Lane]
+                   ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """Band through a junction from the allowed lanes of one edge to those of the next.
+
+    Each side is the curve SUMO rounds a kerb with: a cubic Bezier from the incoming
+    band's side, where it ends, to the outgoing band's side, where it starts, tangent to
+    both (a circular arc where the two ends are symmetric about the corner). It lies in the
+    triangle of the two ends and the corner, which is paved: the edges end at the
+    junction's outline. ``None`` where the turn is sharper than :data:`MAX_FILLET_TURN`
+    or the sides would cross (the internal lanes' band serves there).
+    """
+    ends = []
+    for lane, side, at_end in ((incoming[0], -1.0, True), (incoming[-1], 1.0, True),
+                               (outgoing[0], -1.0, False), (outgoing[-1], 1.0, False)):
+        shape = dedupe_polyline(lane.shape)
+        if len(shape) < 2:
+            return None
+        a, b = (shape[-2], shape[-1]) if at_end else (shape[0], shape[1])
+        d = (b - a) / float(np.hypot(*(b - a)))
+        p = b if at_end else a
+        ends.append((p + side * lane.width / 2.0 * np.array([-d[1], d[0]]), d))
+    (r0, dr0), (l0, dl0), (r1, dr1), (l1, dl1) = ends
+    turn = abs(float(np.arctan2(dr0[0] * dr1[1] - dr0[1] * dr1[0], dr0 @ dr1)))
+    if turn > MAX_FILLET_TURN:
+        return None
+    right = _kerb_curve(r0, dr0, r1, dr1, turn)
+    left = _kerb_curve(l0, dl0, l1, dl1, turn)
+    if right is None or left is None:
+        return None
+    normal = np.column_stack((-(right[1:] - right[:-1])[:, 1], (right[1:] - right[:-1])[:, 0]))
+    if np.any(np.einsum("ij,ij->i", left[1:] - right[1:], normal) <= 0.0):
+        return None  # the sides cross: not a band
+    return _band(right, 0.0, left, 0.0)
+
+
+#: Handles of :func:`_kerb_curve` relative to a circular arc's: a little shorter, so that the
+#: curve stays inside kerbs that SUMO draws as a few straight pieces.
+KERB_HANDLE = 1.1
+
+
+def _kerb_curve(p0: FloatArray, d0: FloatArray, p1: FloatArray, d1: FloatArray,
+                turn: float, n: int = 25) -> FloatArray | None:
+    """Cubic Bezier ``(n, 2)`` from ``p0`` leaving along ``d0`` to ``p1`` arriving along
+    ``d1`` (unit vectors), its handles sized so that it is a circular arc of angle ``turn``
+    [rad] when the ends are symmetric; ``None`` if ``p1`` is not ahead of ``p0``."""
+    chord = p1 - p0
+    length = float(np.hypot(*chord))
+    if length < 1e-6:
+        return np.vstack((p0, p1))
+    if chord @ d0 <= 0.0 or chord @ d1 <= 0.0:
+        return None
+    handle = length / 3.0
+    if turn > 1e-6:
+        handle = length * (2.0 / 3.0) * np.tan(turn / 4.0) / np.sin(turn / 2.0)
+    handle *= KERB_HANDLE
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    c0, c1 = p0 + handle * d0, p1 - handle * d1
+    return ((1 - t) ** 3 * p0 + 3 * (1 - t) ** 2 * t * c0 + 3 * (1 - t) * t ** 2 * c1
+            + t ** 3 * p1)
 
 
 def _via_shape(network: RoadNetwork, via: tuple[str, ...]) -> FloatArray:

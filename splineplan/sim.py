@@ -64,7 +64,11 @@ from splineplan.errors import (
     TrajectoryError,
     VehicleClassError,
 )
-from splineplan.geometry import FloatArray, heading_from_sumo_angle, sumo_angle_from_heading
+from splineplan.geometry import (
+    FloatArray,
+    heading_from_sumo_angle,
+    sumo_angle_from_heading_scalar,
+)
 from splineplan.metrics import (
     CURVATURE_SPAN,
     dynamics,
@@ -426,6 +430,12 @@ class _Run:
         seg_len = np.hypot(self._ref_ab[:, 0], self._ref_ab[:, 1])
         self._ref_len = np.where(seg_len > 0, seg_len, 1.0)  # zero-length: t = 0, l = 0
         self._ref_heading = np.arctan2(self._ref_ab[:, 1], self._ref_ab[:, 0])
+        # the same as contiguous columns, and the stations as a list, for :meth:`_project`
+        self._ref_cols = (self._ref_a[:, 0].copy(), self._ref_a[:, 1].copy(),
+                          self._ref_ab[:, 0].copy(), self._ref_ab[:, 1].copy(),
+                          self._ref_len * self._ref_len)
+        self._ref_s = np.asarray(corridor.s, dtype=float).tolist()
+        self._edge_starts = np.asarray(corridor.edge_starts, dtype=float).tolist()
         self._obs_cache = {}
         i = len(edges) - 1
         goal_len = self.net.length_of(ego.goal_edge)
@@ -703,7 +713,7 @@ class _Run:
         within 2 m.
         """
         ego, o = self.sc.ego, self.others
-        ego_box = _box(x, y, h, ego.length, ego.width)
+        corners = _box_corners(x, y, h, ego.length, ego.width)
         clear_obs = clear_veh = math.inf
         r_ego = 0.5 * math.hypot(ego.length, ego.width)
         if o.n:
@@ -723,10 +733,14 @@ class _Run:
             if o.n_stopped < o.n:
                 clear_veh = float(dist[~o.stopped].min() if o.n_stopped else dist.min())
         if len(self.polygons):
+            ego_box = np.array(corners)
             near = self.polygons.near(ego_box, self.sc.sim.lookahead)
             if len(near):
                 clear_obs = min(clear_obs, float(near.distance(ego_box).min()))
-        probe = np.concatenate((ego_box, 0.5 * (ego_box + ego_box[[1, 2, 3, 0]])))
+        # the corners and the edges' midpoints
+        probe = corners + [(0.5 * (ax + bx), 0.5 * (ay + by))
+                           for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1],
+                                                         strict=True)]
         off_road = not self.road.contains_all(probe, centre=(x, y), radius=r_ego)
         return clear_obs, clear_veh, off_road
 
@@ -747,27 +761,50 @@ class _Run:
         pts = pts.reshape(-1, 2)
         s = c.s
         nseg = len(s) - 1
-        lo = max(int(np.searchsorted(s, self.station - back)) - 1, 0)
-        hi = min(int(np.searchsorted(s, self.station + ahead)) + 1, nseg)
+        lo = max(bisect.bisect_left(self._ref_s, self.station - back) - 1, 0)
+        hi = min(bisect.bisect_left(self._ref_s, self.station + ahead) + 1, nseg)
         if hi <= lo:
             out = np.asarray(c.to_sl(pts))
             return out[0] if one else out
-        a, ab, seg_len = self._ref_a[lo:hi], self._ref_ab[lo:hi], self._ref_len[lo:hi]
-        dx = pts[:, 0, None] - a[:, 0]  # (k, n)
-        dy = pts[:, 1, None] - a[:, 1]
-        t = np.minimum(np.maximum((dx * ab[:, 0] + dy * ab[:, 1]) / (seg_len * seg_len), 0.0),
-                       1.0)
-        ex = dx - t * ab[:, 0]
-        ey = dy - t * ab[:, 1]
+        cols = self._ref_cols
+        ax, ay, abx, aby, len2 = (cols[0][lo:hi], cols[1][lo:hi], cols[2][lo:hi],
+                                  cols[3][lo:hi], cols[4][lo:hi])
+        if one:  # one point: the same arithmetic on (n,) rows, then plain floats
+            px, py = float(pts[0, 0]), float(pts[0, 1])
+            dx1 = px - ax
+            dy1 = py - ay
+            t1 = np.minimum(np.maximum((dx1 * abx + dy1 * aby) / len2, 0.0), 1.0)
+            ex1 = dx1 - t1 * abx
+            ey1 = dy1 - t1 * aby
+            k1 = int(np.argmin(ex1 * ex1 + ey1 * ey1))
+            if (k1 == 0 and lo > 0) or (k1 == hi - lo - 1 and hi < nseg):
+                return np.asarray(c.to_sl(pts))[0]
+            ln1 = float(self._ref_len[lo + k1])
+            return np.array([float(s[lo + k1]) + float(t1[k1]) * ln1,
+                             (float(abx[k1]) * float(dy1[k1]) - float(aby[k1])
+                              * float(dx1[k1])) / ln1])
+        dx = pts[:, 0, None] - ax  # (k, n)
+        dy = pts[:, 1, None] - ay
+        t = np.minimum(np.maximum((dx * abx + dy * aby) / len2, 0.0), 1.0)
+        ex = dx - t * abx
+        ey = dy - t * aby
         k = np.argmin(ex * ex + ey * ey, axis=1)
         r = np.arange(len(pts))
-        ln = seg_len[k]
+        ln = self._ref_len[lo + k]
         out = np.column_stack((s[lo + k] + t[r, k] * ln,
-                               (ab[k, 0] * dy[r, k] - ab[k, 1] * dx[r, k]) / ln))
+                               (abx[k] * dy[r, k] - aby[k] * dx[r, k]) / ln))
         edge = ((k == 0) & (lo > 0)) | ((k == hi - lo - 1) & (hi < nseg))
         if edge.any():
             out[edge] = c.to_sl(pts[edge])
         return out[0] if one else out
+
+    def _edge_at(self, station: float) -> str:
+        """:meth:`Corridor.edge_at` of the route's corridor (``""`` for none), on a list."""
+        assert self.corridor is not None
+        edges = self.corridor.edges
+        if not edges:
+            return ""
+        return edges[max(bisect.bisect_right(self._edge_starts, station) - 1, 0)] or ""
 
     limited = 0
     deviation = 0.0
@@ -821,6 +858,8 @@ class _Run:
         return float(sl[:, 0].min()), float(sl[:, 0].max()), lateral
 
     def _ahead_ids(self, veh: np.ndarray, poly: np.ndarray) -> set[str]:
+        if not len(veh) and not len(poly):
+            return set()
         ids = self.others.ids
         return {ids[i] for i in veh} | {self.polygons.ids[j] for j in poly}
 
@@ -1004,17 +1043,31 @@ class _Run:
         # a cheap first cut in the ego's own frame, before projecting onto the route
         x, y, h = (float(v) for v in self.pose)
         ch, sh = math.cos(h), math.sin(h)
-        dx, dy = o.cx - x, o.cy - y
-        lon = dx * ch + dy * sh
-        lat = np.abs(dy * ch - dx * sh)
-        # a vehicle heading more than 45 degrees plus the route's largest turn away from the
-        # ego's heading (within the beside stations) cannot drive the route's way
-        cos_min = math.cos(min(math.pi / 4.0 + self._route_turn(h), math.pi))
-        cand = np.flatnonzero(~o.stopped & (lon > -_BESIDE_BACK - 5.0)
-                              & (lon < _BESIDE_AHEAD + 5.0) & (lat > BESIDE_LATERAL - 0.5)
-                              & (lat < 10.0) & (o.cos * ch + o.sin * sh >= cos_min - 1e-9))
-        if not len(cand):
-            return cand, np.zeros((0, 2))
+        window = self._route_window()
+        cos_min = math.nan  # computed once a vehicle needs it
+        picked = []
+        # plain floats: a few vehicles
+        for i, (cx, cy, co, si, stopped) in enumerate(zip(
+                o.cx.tolist(), o.cy.tolist(), o.cos.tolist(), o.sin.tolist(),
+                o.stopped.tolist(), strict=True)):
+            if stopped:
+                continue
+            dx, dy = cx - x, cy - y
+            lon = dx * ch + dy * sh
+            lat = abs(dy * ch - dx * sh)
+            if not (-_BESIDE_BACK - 5.0 < lon < _BESIDE_AHEAD + 5.0
+                    and BESIDE_LATERAL - 0.5 < lat < 10.0):
+                continue
+            if math.isnan(cos_min):
+                # a vehicle heading more than 45 degrees plus the route's largest turn away
+                # from the ego's heading (within the beside stations) cannot drive the
+                # route's way
+                cos_min = math.cos(min(math.pi / 4.0 + self._route_turn(h, window), math.pi))
+            if co * ch + si * sh >= cos_min - 1e-9:
+                picked.append(i)
+        if not picked:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+        cand = np.asarray(picked, dtype=np.int64)
         c = self.corridor
         sl = self._project(np.column_stack((o.cx[cand], o.cy[cand])),
                            back=_BESIDE_BACK + 15.0, ahead=_BESIDE_AHEAD + 15.0)
@@ -1028,10 +1081,10 @@ class _Run:
                 & (np.abs(sl[:, 1] - self.lateral) >= BESIDE_LATERAL))
         return cand[keep], sl[keep]
 
-    def _route_turn(self, h: float) -> float:
-        """Largest angle [rad] between a heading ``h`` and the route's segments from a metre
-        before :data:`_BESIDE_BACK` behind the ego's station to a metre after
-        :data:`_BESIDE_AHEAD` ahead (the window moves on once the ego has driven a metre)."""
+    def _route_window(self) -> FloatArray:
+        """Headings [rad] of the route's segments from a metre before :data:`_BESIDE_BACK`
+        behind the ego's station to a metre after :data:`_BESIDE_AHEAD` ahead (the window
+        moves on once the ego has driven a metre)."""
         c = self.corridor
         assert c is not None
         key = self._turn_key
@@ -1040,7 +1093,13 @@ class _Run:
             hi = int(np.searchsorted(c.s, self.station + _BESIDE_AHEAD + 2.0)) + 1
             self._turn_window = self._ref_heading[lo:hi]
             self._turn_key = (c, self.station)
-        d = np.abs(np.mod(self._turn_window - h + math.pi, 2.0 * math.pi) - math.pi)
+        return self._turn_window
+
+    @staticmethod
+    def _route_turn(h: float, window: FloatArray) -> float:
+        """Largest angle [rad] between a heading ``h`` and the headings ``window``
+        (:meth:`_route_window`)."""
+        d = np.abs(np.mod(window - h + math.pi, 2.0 * math.pi) - math.pi)
         return float(d.max()) if len(d) else math.pi
 
     def _moving_obstacles(self) -> Obstacles:
@@ -1133,6 +1192,8 @@ class _Run:
         # plain lists for the per-step interpolation along the path
         self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
                     self.path_heading.tolist(), (self.path_speed**2).tolist())
+        self._full = (self.full_s.tolist(), self.full_xy[:, 0].tolist(),
+                      self.full_xy[:, 1].tolist(), self.full_heading.tolist())
         self.traj = traj
         self.u = 0.0
         # the trajectory starts at the ego's centre: keep u where the ego is
@@ -1208,7 +1269,7 @@ class _Run:
         v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (end - self.u), 0.0)))
         v_target = min(v_plan, v_cap)
         emergency = 2.0 * tp.b_max
-        v_new = float(np.clip(v_target, self.v - emergency * dt, self.v + tp.a_max * dt))
+        v_new = min(max(v_target, self.v - emergency * dt), self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
         u = min(self.u + 0.5 * (self.v + v_new) * dt, end)
         if u >= end:
@@ -1228,9 +1289,9 @@ class _Run:
         x, y, h = self.pose
         fx = x + ego.length / 2.0 * math.cos(h)
         fy = y + ego.length / 2.0 * math.sin(h)
-        angle = float(sumo_angle_from_heading(h))
+        angle = sumo_angle_from_heading_scalar(float(h))
         assert self.corridor is not None
-        edge = self.corridor.edge_at(self.station) or ""
+        edge = self._edge_at(self.station)
         lane = _lane_index(self.last_lane)
         t0 = time.perf_counter()
         s.vehicle.moveToXY(self.ego, edge, lane, fx, fy, angle, KEEP_ROUTE)
@@ -1251,36 +1312,32 @@ class _Run:
         o = self.others
         reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
         if o.n:
-            balls = self.path_tree.query_ball_point(np.column_stack((o.cx, o.cy)),
-                                                    o.radius + reach)
-            i0 = int(np.searchsorted(self.path_s, self.u))  # first sample ahead
+            # sorted sample indices within each bounding circle plus the reach
+            balls = self.path_tree.query_ball_point(o.centre, o.radius + reach,
+                                                    return_sorted=True)
+            full_s, full_x, full_y, full_h = self._full
+            i0 = bisect.bisect_left(self._pl[0], self.u)  # first sample ahead
             cand = []
             for j, near in enumerate(balls):
-                if near and max(near) >= i0:
-                    cand.append((min(i for i in near if i >= i0), j))
+                if near and near[-1] >= i0:
+                    k0 = bisect.bisect_left(near, i0)
+                    cand.append((near[k0], j, k0))
             cand.sort()
             reach2 = reach * reach
             base = self.u + ego.length / 2.0 + sim.min_gap
-            for lo, j in cand:
+            for lo, j, k0 in cand:
                 # the gap is at least up to the first sample in reach of the bounding
                 # circle, and a leader's speed is at least 0: nothing after can go lower
-                if _safe_speed(float(self.full_s[lo]) - base, 0.0, tp.b_max,
-                               sim.time_gap) >= cap:
+                if _safe_speed(full_s[lo] - base, 0.0, tp.b_max, sim.time_gap) >= cap:
                     break
-                idx = np.asarray(balls[j])
-                idx = idx[idx >= i0]
                 pts = _probe_points(float(o.cx[j]), float(o.cy[j]), float(o.cos[j]),
                                     float(o.sin[j]), 0.5 * float(o.length[j]),
-                                    0.5 * float(o.width[j]))  # (9, 2)
-                q = self.full_xy[idx]
-                ex = pts[:, 0, None] - q[:, 0]
-                ey = pts[:, 1, None] - q[:, 1]
-                hit = ((ex * ex + ey * ey) <= reach2).any(axis=0)
-                if not hit.any():
+                                    0.5 * float(o.width[j]))
+                first = _first_in_reach(pts, balls[j], k0, full_x, full_y, reach2)
+                if first < 0:
                     continue
-                first = int(idx[hit].min())
-                gap = float(self.full_s[first]) - base
-                rel = math.cos(float(o.head[j]) - float(self.full_heading[first]))
+                gap = full_s[first] - base
+                rel = math.cos(float(o.head[j]) - full_h[first])
                 v_l = max(float(o.speed[j]) * rel, 0.0)
                 cap = min(cap, _safe_speed(gap, v_l, tp.b_max, sim.time_gap))
         cap = min(cap, self._red_light_speed())
@@ -1444,6 +1501,9 @@ class _RoadCheck:
         self._near_at: tuple[float, float] | None = None
         self._near: tuple[FloatArray, ...] = ()
         self._hot: tuple[FloatArray, ...] | None = None
+        # the same segments as rows (start x, y, direction x, y, 1 / squared length,
+        # squared reach) of plain floats
+        self._hot_rows: list[tuple[float, ...]] = []
 
     def add_junctions(self, shapes: list[FloatArray]) -> None:
         """Junction areas (SUMO's junction polygons) count as road too."""
@@ -1455,7 +1515,8 @@ class _RoadCheck:
                 good.append(p)
         self.junctions = Obstacles.from_polygons(good) if good else Obstacles.empty()
 
-    def contains_all(self, points: FloatArray, *, centre: tuple[float, float] | None = None,
+    def contains_all(self, points: FloatArray | list[tuple[float, float]], *,
+                     centre: tuple[float, float] | None = None,
                      radius: float | None = None) -> bool:
         """Whether every point ``(n, 2)`` of a small group (a footprint) is on the road,
         as :meth:`contains`.
@@ -1465,11 +1526,21 @@ class _RoadCheck:
         them the few that held the points last time: a footprint moving along a lane is
         measured against those first, and against all gathered ones only when they do not
         hold every point. ``centre`` [m] and ``radius`` [m]: a disc that holds the points,
-        if known (else their mean and largest distance from it).
+        if known (else their mean and largest distance from it). ``points`` may be a list
+        of ``(x, y)`` pairs.
         """
-        pts = np.asarray(points, dtype=float).reshape(-1, 2)
         if not len(self.a):
             return False
+        tried = False
+        if centre is not None and radius is not None and radius <= _ROAD_CACHE / 2.0:
+            cx, cy = centre
+            if (self._near_at is not None and self._hot_rows
+                    and math.hypot(cx - self._near_at[0], cy - self._near_at[1])
+                    <= _ROAD_CACHE / 2.0):
+                if _in_rows(points, self._hot_rows):
+                    return True  # as below, the common case without arrays
+                tried = True
+        pts = np.asarray(points, dtype=float).reshape(-1, 2)
         if centre is None or radius is None:
             cx, cy = pts.mean(axis=0).tolist()
             spread = float(np.sqrt(((pts[:, 0] - cx) ** 2 + (pts[:, 1] - cy) ** 2).max()))
@@ -1480,7 +1551,7 @@ class _RoadCheck:
         if (self._near_at is None
                 or math.hypot(cx - self._near_at[0], cy - self._near_at[1]) > _ROAD_CACHE / 2.0):
             self._gather(cx, cy)
-        if self._hot is not None and _in_bands(pts, self._hot).all():
+        if not tried and self._hot is not None and _in_bands(pts, self._hot).all():
             return True
         near = self._near
         if len(near[0]):
@@ -1488,6 +1559,8 @@ class _RoadCheck:
             on = within.any(axis=1)
             hot = within.any(axis=0)
             self._hot = tuple(v[hot] for v in near) if hot.any() else None
+            self._hot_rows = (list(zip(*(v.tolist() for v in self._hot), strict=True))
+                              if self._hot is not None else [])
             if on.all():
                 return True
         else:
@@ -1515,6 +1588,7 @@ class _RoadCheck:
                       1.0 / np.where(ln2 > 0, ln2, 1.0), (hw + self.tol) ** 2)
         self._near_at = (cx, cy)
         self._hot = None
+        self._hot_rows = []
 
     def contains(self, points: FloatArray) -> np.ndarray:
         """``(n,)`` booleans: the point is within a lane's half width of its centre line."""
@@ -1558,15 +1632,32 @@ def _in_bands(pts: FloatArray, segs: tuple[FloatArray, ...], *, per_segment: boo
     return within if per_segment else np.asarray(within.any(axis=1))
 
 
+def _in_rows(pts: Any, rows: list[tuple[float, ...]]) -> bool:
+    """Whether every point ``(x, y)`` lies within the band of some lane segment of ``rows``
+    (as :func:`_in_bands`, with plain floats: a few points against a few segments)."""
+    for px, py in pts:
+        for ax, ay, abx, aby, inv, lim2 in rows:
+            dx, dy = px - ax, py - ay
+            t = (dx * abx + dy * aby) * inv
+            t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
+            ex, ey = dx - t * abx, dy - t * aby
+            if ex * ex + ey * ey <= lim2:
+                break
+        else:
+            return False
+    return True
+
+
 class _Others:
     """The vehicles around the ego at one step, as arrays (internal).
 
     ``front`` ``(k, 2)`` [m] is SUMO's position (middle of the front bumper), ``head``
-    ``(k,)`` [rad] the heading, ``cx``, ``cy`` ``(k,)`` [m] the centre, ``radius`` ``(k,)``
-    [m] the bounding circle's.
+    ``(k,)`` [rad] the heading, ``centre`` ``(k, 2)`` [m] the centre (``cx``, ``cy`` its
+    columns), ``radius`` ``(k,)`` [m] the bounding circle's.
     """
 
     __slots__ = (
+        "centre",
         "cos",
         "cx",
         "cy",
@@ -1588,7 +1679,7 @@ class _Others:
         self.ids = ids
         self.n = len(ids)
         self.front = a[:, :2]
-        self.head = heading_from_sumo_angle(a[:, 2])
+        self.head = np.radians(90.0 - a[:, 2])  # as heading_from_sumo_angle
         self.cos = np.cos(self.head)
         self.sin = np.sin(self.head)
         self.length = a[:, 3]
@@ -1602,23 +1693,27 @@ class _Others:
             self.stopped = np.zeros(self.n, dtype=bool)
             self.n_stopped = 0
         half = 0.5 * self.length
-        self.cx = a[:, 0] - half * self.cos
-        self.cy = a[:, 1] - half * self.sin
+        self.centre = np.empty((self.n, 2))
+        np.subtract(a[:, 0], half * self.cos, out=self.centre[:, 0])
+        np.subtract(a[:, 1], half * self.sin, out=self.centre[:, 1])
+        self.cx = self.centre[:, 0]
+        self.cy = self.centre[:, 1]
         self.radius = 0.5 * np.hypot(self.length, self.width)
 
 
 _NO_OTHERS = _Others([], np.zeros((0, 7)), 0.0)
 
 
-def _box(x: float, y: float, h: float, length: float, width: float) -> FloatArray:
-    """Corners ``(4, 2)`` [m] of a rectangle from its centre and heading [rad] (rear right
-    first, counter-clockwise), as :func:`splineplan.metrics.footprint`."""
+def _box_corners(x: float, y: float, h: float, length: float, width: float
+                 ) -> list[tuple[float, float]]:
+    """Corners (4 points x, y) [m] of a rectangle from its centre and heading [rad] (rear
+    right first, counter-clockwise), as :func:`splineplan.metrics.footprint`."""
     c, s = math.cos(h), math.sin(h)
     hl, hw = length / 2.0, width / 2.0
-    return np.array([[x - hl * c + hw * s, y - hl * s - hw * c],
-                     [x + hl * c + hw * s, y + hl * s - hw * c],
-                     [x + hl * c - hw * s, y + hl * s + hw * c],
-                     [x - hl * c - hw * s, y - hl * s + hw * c]])
+    return [(x - hl * c + hw * s, y - hl * s - hw * c),
+            (x + hl * c + hw * s, y + hl * s - hw * c),
+            (x + hl * c - hw * s, y + hl * s + hw * c),
+            (x - hl * c - hw * s, y - hl * s + hw * c)]
 
 
 @dataclass(frozen=True)
@@ -1667,14 +1762,29 @@ def _interp(u: float, s: list[float], v: list[float]) -> float:
 
 
 def _probe_points(cx: float, cy: float, c: float, s: float, hl: float, hw: float
-                  ) -> FloatArray:
-    """Corners, centre and edge midpoints ``(9, 2)`` of a rectangle [m] from its centre,
-    heading's cosine and sine, half length and half width."""
+                  ) -> list[tuple[float, float]]:
+    """Corners, centre and edge midpoints (9 points x, y) of a rectangle [m] from its
+    centre, heading's cosine and sine, half length and half width."""
     fx, fy, lx, ly = c * hl, s * hl, -s * hw, c * hw
-    return np.array([(cx - fx - lx, cy - fy - ly), (cx + fx - lx, cy + fy - ly),
-                     (cx + fx + lx, cy + fy + ly), (cx - fx + lx, cy - fy + ly), (cx, cy),
-                     (cx + fx, cy + fy), (cx + lx, cy + ly), (cx - fx, cy - fy),
-                     (cx - lx, cy - ly)])
+    return [(cx - fx - lx, cy - fy - ly), (cx + fx - lx, cy + fy - ly),
+            (cx + fx + lx, cy + fy + ly), (cx - fx + lx, cy - fy + ly), (cx, cy),
+            (cx + fx, cy + fy), (cx + lx, cy + ly), (cx - fx, cy - fy), (cx - lx, cy - ly)]
+
+
+def _first_in_reach(pts: list[tuple[float, float]], samples: list[int], k0: int,
+                    xs: list[float], ys: list[float], reach2: float) -> int:
+    """The first of the sorted sample indices ``samples[k0:]`` whose point (``xs``, ``ys``)
+    [m] is within ``sqrt(reach2)`` [m] of any of the points ``pts``; -1 if none is.
+
+    Plain floats: a handful of points against a handful of samples, stopping at the first
+    hit, costs less than setting up arrays."""
+    for i in samples[k0:]:
+        qx, qy = xs[i], ys[i]
+        for px, py in pts:
+            ex, ey = px - qx, py - qy
+            if ex * ex + ey * ey <= reach2:
+                return int(i)
+    return -1
 
 
 def _safe_speed(gap: float, v_leader: float, b: float, tau: float) -> float:

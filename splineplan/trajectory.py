@@ -56,7 +56,6 @@ import logging
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import BSpline
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
@@ -344,7 +343,7 @@ class _Checker:
     half_length: float
     half_width: float
     margin: float
-    polys: FloatArray  # (K, V, 2), padded with each ring's last vertex
+    polys: FloatArray  # (2, V, K): x and y of each polygon's vertices, padded with its last
     bbox: FloatArray  # (K, 4)
     body: FloatArray = field(init=False)  # (2, q) body-frame points: footprint, then centre
     frames: tuple[FloatArray, ...] = field(init=False)
@@ -363,7 +362,8 @@ class _Checker:
         object.__setattr__(self, "frames", (
             st, ref[:-1, 0].copy(), ref[:-1, 1].copy(), np.cos(h), np.sin(h), left, right))
         # per segment, over the stations the footprint can reach from it: the narrowest
-        # boundaries and the largest turn of the reference line (for a quick clear test)
+        # boundaries and the largest turn of the reference line (for a quick clear test),
+        # and the segment's own heading [rad]
         ds = np.diff(st)
         w = int(np.ceil((np.hypot(hl, hw) + 1.0) / max(float(np.quantile(ds, 0.1)), 1e-3)))
         size = min(2 * w + 1, 2 * len(ds) + 1)
@@ -372,22 +372,26 @@ class _Checker:
         hh = np.unwrap(h)
         turn = (maximum_filter1d(hh, size, mode="nearest")
                 - minimum_filter1d(hh, size, mode="nearest"))
-        object.__setattr__(self, "window", (lmin, rmax, turn))
+        seg_heading = np.arctan2(self.frames[4], self.frames[3])
+        object.__setattr__(self, "window", (lmin, rmax, turn, seg_heading))
 
     @classmethod
     def build(cls, corridor: Corridor, obstacles: Obstacles, params: RoadmapParams,
               near_xy: FloatArray) -> _Checker:
         reach = np.hypot(params.vehicle_length, params.vehicle_width) / 2.0
-        obs = obstacles.near(near_xy, reach + params.safety_margin + CLEARANCE_HORIZON + 5.0)
-        k = len(obs)
-        vmax = int(np.max(np.diff(obs.offsets))) if k else 3
-        polys = np.zeros((k, vmax, 2))
-        for i in range(k):
-            p = obs.polygon(i)
-            polys[i, :len(p)] = p
-            polys[i, len(p):] = p[-1]
+        radius = reach + params.safety_margin + CLEARANCE_HORIZON + 5.0
+        # the obstacles whose bounding box comes within the radius of the points' extent
+        lo, hi = near_xy.min(axis=0) - radius, near_xy.max(axis=0) + radius
+        b = obstacles.bbox
+        sel = np.flatnonzero((b[:, 0] <= hi[0]) & (b[:, 2] >= lo[0]) & (b[:, 1] <= hi[1])
+                             & (b[:, 3] >= lo[1]))
+        start = obstacles.offsets[sel]
+        count = obstacles.offsets[sel + 1] - start
+        vmax = int(count.max()) if len(sel) else 3
+        idx = start[None, :] + np.minimum(np.arange(vmax)[:, None], count[None, :] - 1)
+        polys = np.moveaxis(obstacles.vertices[idx], 2, 0)  # (V, K, 2) -> (2, V, K)
         return cls(corridor, params.vehicle_length / 2.0, params.vehicle_width / 2.0,
-                   params.safety_margin, polys, obs.bbox.copy() if k else np.zeros((0, 4)))
+                   params.safety_margin, np.ascontiguousarray(polys), b[sel])
 
     def stations(self, xy: FloatArray) -> FloatArray:
         """Stations [m] of points ``(n, 2)`` on the reference line (exact projection)."""
@@ -407,25 +411,25 @@ class _Checker:
         st, rx, ry, hc, hs, left, right = self.frames
         if sc is None:
             sc = self.stations(xy)
-        nseg = len(st) - 2
-        bx, by = self.body
-        c, s = np.cos(heading)[:, None], np.sin(heading)[:, None]
-        px = (xy[:, 0, None] + c * bx) - s * by
-        py = (xy[:, 1, None] + s * bx) + c * by
-        i0 = np.searchsorted(st, sc, side="right") - 1
-        np.clip(i0, 0, nseg, out=i0)
-        est = st[i0, None] + ((px - rx[i0, None]) * hc[i0, None]
-                              + (py - ry[i0, None]) * hs[i0, None])
-        i = np.searchsorted(st, est, side="right") - 1
-        np.clip(i, 0, nseg, out=i)
+        inner = st[1:-1]
+        # footprint points (7, n): samples along the last axis, so that numpy's loops are long
+        bx, by = self.body[0, :, None], self.body[1, :, None]
+        c, s = np.cos(heading), np.sin(heading)
+        px = (xy[:, 0] + c * bx) - s * by
+        py = (xy[:, 1] + s * bx) + c * by
+        # segment at each station, the end segments beyond the ends: searching the inner
+        # stations gives it in 0 .. len(st) - 2 directly
+        i0 = np.searchsorted(inner, sc, side="right")
+        est = st[i0] + ((px - rx[i0]) * hc[i0] + (py - ry[i0]) * hs[i0])
+        i = np.searchsorted(inner, est, side="right")
         dx, dy = px - rx[i], py - ry[i]
         ci, si = hc[i], hs[i]
         along = st[i] + dx * ci + dy * si
         lat = dy * ci - dx * si
-        f = along[:, :-1]
-        clear = np.minimum(np.interp(f, st, left) - lat[:, :-1],
-                           lat[:, :-1] - np.interp(f, st, right)).min(axis=1)
-        return clear, along[:, -1]
+        f = along[:-1]
+        clear = np.minimum(np.interp(f, st, left) - lat[:-1],
+                           lat[:-1] - np.interp(f, st, right)).min(axis=0)
+        return clear, along[-1]
 
     def slack(self, xy: FloatArray, heading: FloatArray, sc: FloatArray | None = None
               ) -> tuple[FloatArray, FloatArray]:
@@ -436,18 +440,17 @@ class _Checker:
         # the centres in the frame of the reference segment at their station (from the
         # estimate, one step of refinement)
         st, rx, ry, hc, hs, _, _ = self.frames
-        lmin, rmax, turn = self.window
+        lmin, rmax, turn, seg_heading = self.window
         sc_new = sc
         for _ in range(2):
-            i = np.searchsorted(st, sc_new, side="right") - 1
-            np.clip(i, 0, len(st) - 2, out=i)
+            i = np.searchsorted(st[1:-1], sc_new, side="right")  # as in :meth:`road`
             dx, dy = xy[:, 0] - rx[i], xy[:, 1] - ry[i]
             ci, si = hc[i], hs[i]
             sc_new = st[i] + dx * ci + dy * si
         lat = dy * ci - dx * si
         # clearly on the road (a lower bound of the clearance is above the margin): no
         # exact check of the footprint
-        dh = heading - np.arctan2(si, ci)
+        dh = heading - seg_heading[i]
         ext = (self.half_length * np.abs(np.sin(dh)) + self.half_width * np.abs(np.cos(dh))
                + (np.abs(lat) + self.half_length + self.half_width) * turn[i] + 0.05)
         road = np.minimum(lmin[i] - lat, lat - rmax[i]) - ext
@@ -465,7 +468,7 @@ class _Checker:
         those separated by more than that along the footprint's axes, so that ``inf``
         may stand for any distance beyond ``margin + horizon``)."""
         out = np.full(len(xy), np.inf)
-        if len(self.polys) == 0 or len(xy) == 0:
+        if len(self.bbox) == 0 or len(xy) == 0:
             return out
         r = np.hypot(self.half_length, self.half_width) + self.margin + horizon
         b = self.bbox
@@ -479,64 +482,92 @@ class _Checker:
         hit = (b[:, 0] <= x + r) & (b[:, 2] >= x - r) & (b[:, 1] <= y + r) & (b[:, 3] >= y - r)
         js, os = np.nonzero(hit)
         os = near[os]
-        if len(js) and cull:
-            c, s = np.cos(heading[js])[:, None], np.sin(heading[js])[:, None]
-            pol = self.polys[os]
-            rx, ry = pol[..., 0] - xy[js, 0, None], pol[..., 1] - xy[js, 1, None]
-            u, v = rx * c + ry * s, ry * c - rx * s
-            gap = self.margin + horizon
-            keep = ((u.min(axis=1) < self.half_length + gap)
-                    & (u.max(axis=1) > -self.half_length - gap)
-                    & (v.min(axis=1) < self.half_width + gap)
-                    & (v.max(axis=1) > -self.half_width - gap))
-            js, os = js[keep], os[keep]
         if len(js) == 0:
             return out
-        d = _rect_polygon_distance(xy[js], heading[js], self.half_length, self.half_width,
-                                   self.polys[os])
-        np.minimum.at(out, js, d)
+        u, v = _body_frame(xy[js], heading[js], np.take(self.polys, os, axis=2))
+        if cull:
+            gap = self.margin + horizon
+            keep = ((u.min(axis=0) < self.half_length + gap)
+                    & (u.max(axis=0) > -self.half_length - gap)
+                    & (v.min(axis=0) < self.half_width + gap)
+                    & (v.max(axis=0) > -self.half_width - gap))
+            js, u, v = js[keep], u[:, keep], v[:, keep]
+            if len(js) == 0:
+                return out
+        d = _rect_polygon_distance(u, v, self.half_length, self.half_width)
+        # js is sorted (np.nonzero is row-major): the minimum over each run
+        run = np.flatnonzero(np.concatenate(([True], js[1:] != js[:-1])))
+        out[js[run]] = np.minimum.reduceat(d, run)
         return out
 
 
-_CORNERS = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+def _body_frame(centers: FloatArray, headings: FloatArray, polys: FloatArray
+                ) -> tuple[FloatArray, FloatArray]:
+    """Vertices of polygons ``(2, V, p)`` (x and y) in the frames of poses ``(p, 2)``,
+    ``(p,)``: ``u`` [m] along the heading and ``v`` [m] to its left, each ``(V, p)``."""
+    c, s = np.cos(headings), np.sin(headings)
+    rx = polys[0] - centers[:, 0]
+    ry = polys[1] - centers[:, 1]
+    return rx * c + ry * s, ry * c - rx * s
 
 
-def _rect_polygon_distance(centers: FloatArray, headings: FloatArray, hl: float, hw: float,
-                           polys: FloatArray) -> FloatArray:
-    """Distance [m] between oriented rectangles and polygons ``(p, V, 2)``, 0 on overlap."""
-    c, s = np.cos(headings)[:, None], np.sin(headings)[:, None]
-    rx = polys[..., 0] - centers[:, None, 0]
-    ry = polys[..., 1] - centers[:, None, 1]
-    u = rx * c + ry * s  # body frame: u along the heading, v to the left
-    v = ry * c - rx * s
-    au, av = np.abs(u), np.abs(v)
-    # polygon vertices to the filled rectangle
-    dv = np.hypot(np.maximum(au - hl, 0.0), np.maximum(av - hw, 0.0)).min(axis=1)
-    ub = np.concatenate((u[:, 1:], u[:, :1]), axis=1)  # the next vertex (np.roll, cheaper)
-    vb = np.concatenate((v[:, 1:], v[:, :1]), axis=1)
-    du, dvv = ub - u, vb - v
-    # rectangle corners ``(4,)`` to polygon edges: arrays (p, 4, V)
-    seg2 = du * du + dvv * dvv
+def _rect_polygon_distance(u: FloatArray, v: FloatArray, hl: float, hw: float) -> FloatArray:
+    """Distance ``(p,)`` [m] between the rectangle ``|u| <= hl``, ``|v| <= hw`` and polygons
+    given by their vertices ``(V, p)`` in its frame (:func:`_body_frame`), 0 on overlap.
+
+    Polygons run along the last axis (long rows, so that numpy's loops are long).
+    """
+    # squared distances: polygon vertices to the filled rectangle
+    gu = np.maximum(np.abs(u) - hl, 0.0)
+    gv = np.maximum(np.abs(v) - hw, 0.0)
+    out = (gu * gu + gv * gv).min(axis=0)
+    ub = np.concatenate((u[1:], u[:1]))  # the next vertex
+    vb = np.concatenate((v[1:], v[:1]))
+    du, dv = ub - u, vb - v
+    seg2 = du * du + dv * dv
     inv = 1.0 / np.where(seg2 > 0, seg2, 1.0)
-    cu, cv = hl * _CORNERS[:, 0, None], hw * _CORNERS[:, 1, None]
-    wu, wv = cu - u[:, None, :], cv - v[:, None, :]
-    du3, dv3 = du[:, None, :], dvv[:, None, :]
-    t = wu * du3  # in place from here: the arrays are the largest of the check
-    t += wv * dv3
-    t *= inv[:, None, :]
-    np.clip(t, 0.0, 1.0, out=t)
-    gu = t * du3
-    gu -= wu
-    t *= dv3
-    t -= wv
-    best = np.hypot(gu, t, out=gu).min(axis=(1, 2))
+    # rectangle corners to polygon edges (a loop: arrays for all corners at once are
+    # slower, out of cache)
+    for cu, cv in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw)):
+        wu, wv = cu - u, cv - v
+        t = wu * du
+        t += wv * dv
+        t *= inv
+        np.maximum(t, 0.0, out=t)
+        np.minimum(t, 1.0, out=t)
+        gu = t * du
+        gu -= wu
+        t *= dv
+        t -= wv
+        gu *= gu
+        t *= t
+        gu += t
+        np.minimum(out, gu.min(axis=0), out=out)
+    np.sqrt(out, out=out)
+    # overlap needs the polygon's extent to meet the rectangle: only there do the
+    # crossing and containment tests run
+    meet = np.flatnonzero((u.min(axis=0) <= hl) & (u.max(axis=0) >= -hl)
+                          & (v.min(axis=0) <= hw) & (v.max(axis=0) >= -hw))
+    if len(meet):
+        out[meet[_overlap(u[:, meet], v[:, meet], ub[:, meet], vb[:, meet], hl, hw)]] = 0.0
+    return out
+
+
+def _overlap(u: FloatArray, v: FloatArray, ub: FloatArray, vb: FloatArray, hl: float,
+             hw: float) -> NDArray[np.bool_]:
+    """Whether polygons cross the rectangle ``|u| <= hl``, ``|v| <= hw`` or hold its centre.
+
+    ``u``, ``v`` ``(V, p)``: the vertices in the rectangle's frame; ``ub``, ``vb``: the next
+    vertex of each.
+    """
     # polygon edges crossing the rectangle (Liang-Barsky clipping)
+    du, dv = ub - u, vb - v
     t_in = np.zeros_like(u)
     t_out = np.ones_like(u)
     ok = np.ones(u.shape, dtype=bool)
-    for a, aa, d, h in ((u, au, du, hl), (v, av, dvv, hw)):
+    for a, d, h in ((u, du, hl), (v, dv, hw)):
         flat = np.abs(d) < 1e-15
-        ok &= ~flat | (aa <= h)
+        ok &= ~flat | (np.abs(a) <= h)
         with np.errstate(divide="ignore", invalid="ignore"):
             t1 = (-h - a) / d
             t2 = (h - a) / d
@@ -544,13 +575,13 @@ def _rect_polygon_distance(centers: FloatArray, headings: FloatArray, hl: float,
         hi = np.where(flat, np.inf, np.maximum(t1, t2))
         np.maximum(t_in, lo, out=t_in)
         np.minimum(t_out, hi, out=t_out)
-    crosses = (ok & (t_in <= t_out)).any(axis=1)
+    crosses = (ok & (t_in <= t_out)).any(axis=0)
     # rectangle inside the polygon: its centre (the origin) by crossing number
     straddle = (v > 0) != (vb > 0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ucross = u - v * du / (vb - v)
-    inside = (straddle & (ucross > 0)).sum(axis=1) % 2 == 1
-    return np.asarray(np.where(crosses | inside, 0.0, np.minimum(dv, best)))
+        ucross = u - v * du / dv
+    inside = (straddle & (ucross > 0)).sum(axis=0) % 2 == 1
+    return np.asarray(crosses | inside)
 
 
 # ---- spline set-up ---------------------------------------------------------------------
@@ -560,35 +591,40 @@ def _knots(n: int, k: int) -> FloatArray:
 
 
 def _basis(u: FloatArray, t: FloatArray, k: int, n: int) -> tuple[NDArray[np.int64], FloatArray]:
-    """First control index ``(m,)`` and basis values ``(3, m, k + 1)`` for nu = 0, 1, 2.
+    """First control index ``(m,)`` and basis values ``(3, k + 1, m)`` for nu = 0, 1, 2.
 
-    Row ``j`` holds the values at ``u[j]`` of the basis functions of control points
-    ``first[j] .. first[j] + k`` (the only ones that are not zero there) and their first and
-    second derivatives with respect to the parameter (Cox-de Boor recursion, vectorised over
-    the samples; at ``u = 1`` the left limits).
+    ``basis[nu, :, j]`` holds the values at ``u[j]`` of the basis functions of control
+    points ``first[j] .. first[j] + k`` (the only ones that are not zero there) and their
+    first and second derivatives with respect to the parameter (Cox-de Boor recursion,
+    vectorised over the samples, which run along the last axis; at ``u = 1`` the left
+    limits).
     """
     span = np.clip(np.searchsorted(t, u, side="right") - 1, k, n - 1)
     first = span - k
     m = len(u)
-    tables = [np.ones((m, 1))]
+    # the knots around each sample: row r holds t[span + r - k], r = 0 .. 2k + 1
+    tt = t[span + np.arange(-k, k + 2)[:, None]]
+    tables = [np.ones((1, m))]
     for p in range(1, k + 1):
-        i = span[:, None] + np.arange(-p, 1)[None, :]  # (m, p + 1) function indices
+        # functions span - p .. span: t[i], t[i + 1], t[i + p], t[i + p + 1] as rows of tt
+        ti, ti1 = tt[k - p:k + 1], tt[k - p + 1:k + 2]
+        tip, tip1 = tt[k:k + p + 1], tt[k + 1:k + p + 2]
         ext = _pad(tables[-1])
-        left = _ratio(u[:, None] - t[i], t[i + p] - t[i])
-        right = _ratio(t[i + p + 1] - u[:, None], t[i + p + 1] - t[i + 1])
-        tables.append(left * ext[:, :-1] + right * ext[:, 1:])
-    vals = np.zeros((3, m, k + 1))
+        left = _ratio(u - ti, tip - ti)
+        right = _ratio(tip1 - u, tip1 - ti1)
+        tables.append(left * ext[:-1] + right * ext[1:])
+    vals = np.zeros((3, k + 1, m))
     vals[0] = tables[k]
-    vals[1] = _derive(tables[k - 1], span, t, k)
+    vals[1] = _derive(tables[k - 1], tt, k, k)
     if k >= 2:
-        vals[2] = _derive(_derive(tables[k - 2], span, t, k - 1), span, t, k)
+        vals[2] = _derive(_derive(tables[k - 2], tt, k, k - 1), tt, k, k)
     return first.astype(np.int64), vals
 
 
 def _pad(b: FloatArray) -> FloatArray:
-    """A zero column on each side of ``(m, p)``."""
-    out = np.zeros((len(b), b.shape[1] + 2))
-    out[:, 1:-1] = b
+    """A zero row on each side of ``(p, m)``."""
+    out = np.zeros((b.shape[0] + 2, b.shape[1]))
+    out[1:-1] = b
     return out
 
 
@@ -597,14 +633,14 @@ def _ratio(a: FloatArray, b: FloatArray) -> FloatArray:
     return np.divide(a, b, out=np.zeros(np.broadcast(a, b).shape), where=b > 0)
 
 
-def _derive(b: FloatArray, span: NDArray[np.int64], t: FloatArray, p: int) -> FloatArray:
-    """Parameter derivatives ``(m, p + 1)`` of the degree-``p`` basis functions
-    ``span - p .. span`` from the degree ``p - 1`` ones ``b`` ``(m, p)``:
-    ``N'_{i,p} = p (N_{i,p-1} / (t_{i+p} - t_i) - N_{i+1,p-1} / (t_{i+p+1} - t_{i+1}))``."""
-    i = span[:, None] + np.arange(-p, 1)[None, :]
+def _derive(b: FloatArray, tt: FloatArray, k: int, p: int) -> FloatArray:
+    """Parameter derivatives ``(p + 1, m)`` of the degree-``p`` basis functions
+    ``span - p .. span`` from the degree ``p - 1`` ones ``b`` ``(p, m)``:
+    ``N'_{i,p} = p (N_{i,p-1} / (t_{i+p} - t_i) - N_{i+1,p-1} / (t_{i+p+1} - t_{i+1}))``
+    (``tt``: the knots around the samples, as in :func:`_basis`)."""
     ext = _pad(b)
-    return p * (_ratio(ext[:, :-1], t[i + p] - t[i])
-                - _ratio(ext[:, 1:], t[i + p + 1] - t[i + 1]))
+    return p * (_ratio(ext[:-1], tt[k:k + p + 1] - tt[k - p:k + 1])
+                - _ratio(ext[1:], tt[k + 1:k + p + 2] - tt[k - p + 1:k + 2]))
 
 
 def _greville(t: FloatArray, k: int, n: int) -> FloatArray:
@@ -654,8 +690,15 @@ def plan_trajectory(
     params = params or TrajectoryParams()
     if not (np.isfinite(start_speed) and start_speed >= 0):
         raise TrajectoryError(f"start speed must be >= 0, got {start_speed!r}")
+    smooth = _sharp_bend(roadmap, corridor, params)
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
-                      end_speed)
+                      end_speed, smooth)
+    if not traj.feasible:
+        other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
+                           end_speed, not smooth)
+        log.debug("first control polygon gives no feasible curve; the other: %s",
+                  other.feasible)
+        traj = other if other.feasible else traj
     if traj.feasible or params.detour_rate <= 0 or not _steep(roadmap, params.detour_rate):
         return traj
     detour = detour_roadmap(roadmap, corridor, params.detour_rate)
@@ -665,6 +708,20 @@ def plan_trajectory(
                        end_speed)
     log.debug("level 2's path gives no feasible curve; detour feasible: %s", other.feasible)
     return other if other.feasible else traj
+
+
+#: Stretch [m] of the road over which :func:`_sharp_bend` measures the road's heading change.
+_BEND_BASE = 4.0
+
+
+def _sharp_bend(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams) -> bool:
+    """Whether the road along the roadmap bends on a radius below twice the turning radius
+    (a junction turn): there the first control polygon is the least-bending one."""
+    s = np.asarray(roadmap.s, dtype=float)
+    dh = (corridor.heading_at(s + _BEND_BASE / 2.0)
+          - corridor.heading_at(s - _BEND_BASE / 2.0))
+    turn = np.abs((dh + np.pi) % (2.0 * np.pi) - np.pi)
+    return bool(np.any(turn > 0.5 * params.kappa_max * _BEND_BASE))
 
 
 def _steep(roadmap: Roadmap, rate: float) -> bool:
@@ -677,10 +734,12 @@ def _steep(roadmap: Roadmap, rate: float) -> bool:
 
 def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                params: TrajectoryParams, start_heading: float | None, start_speed: float,
-               end_speed: float | None) -> Trajectory:
-    """:func:`plan_trajectory` along the roadmap's chosen path."""
+               end_speed: float | None, smooth: bool = False) -> Trajectory:
+    """:func:`plan_trajectory` along the roadmap's chosen path (``smooth``: from the
+    least-bending control polygon, see :func:`_control_points`)."""
     rp = roadmap.params
-    pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed)
+    pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
+                                   smooth)
     checker = _Checker.build(corridor, obstacles, rp, pool)
     curve, refinements, doubled, samples = _refine(pool, counts, checker, params)
     opt = _Optimiser(curve, checker, params, samples)
@@ -701,7 +760,7 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
 
 
 def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float | None,
-                    params: TrajectoryParams, start_speed: float
+                    params: TrajectoryParams, start_speed: float, smooth: bool = False
                     ) -> tuple[FloatArray, NDArray[np.int64]]:
     """Candidate control points ``(c, 2)`` and how often the first curve uses each (0 or 1).
 
@@ -710,6 +769,12 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     vertices that band simplification (:func:`band_simplify`) keeps, beginning at the
     farthest vertex that the vehicle's position reaches within the bands (at least the
     lead-in distance ahead).
+
+    With ``smooth``, the vertices beyond the lead-in first move within their bands to the
+    polygon of least bending (:func:`min_bending_offsets`), band simplification then drops
+    those that stand in line, and long legs are split in pieces that grow gradually from
+    the short legs beside them (:func:`_leg_splits`): the first curve then turns as gently
+    as the bands allow, which a junction turn needs.
     """
     rp = roadmap.params
     raw = np.asarray(roadmap.xy, dtype=float)
@@ -747,12 +812,12 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     lines = tuple(a[ahead] for a in lines)  # type: ignore[assignment]
     first = int(np.searchsorted(vs[ahead], s0 + lead - 1e-9))
     first = min(first, len(verts) - 1)
-    # from the vehicle's position as far as the bands allow
-    cap = int(np.searchsorted(polyline_stations(verts), params.max_control_spacing
-                              - float(np.hypot(*(verts[0] - start))), side="right")) - 1
-    if cap >= 0:
-        first = max(first, _farthest(start, -1, cap, verts, *lines))
-    kept = first + band_simplify(verts[first:], *(a[first:] for a in lines))
+    if not smooth:
+        # from the vehicle's position as far as the bands allow
+        cap = int(np.searchsorted(polyline_stations(verts), params.max_control_spacing
+                                  - float(np.hypot(*(verts[0] - start))), side="right")) - 1
+        if cap >= 0:
+            first = max(first, _farthest(start, -1, cap, verts, *lines))
     if start_heading is None:
         direction = verts[first] - start
     else:
@@ -761,15 +826,35 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if norm <= 1e-12:
         raise TrajectoryError("the roadmap's points coincide with the start: no curve")
     heading_point = start + head_len * direction / norm
+    origin, tangent, normal, centre, half = (a[first:] for a in lines)
+    if smooth:
+        # the vehicle's position and heading point are fixed (bands of zero width)
+        fixed = np.zeros(2)
+        lat = min_bending_offsets(
+            np.vstack((start, heading_point, origin)), np.vstack((np.zeros((2, 2)), normal)),
+            np.concatenate((fixed, centre - half)), np.concatenate((fixed, centre + half)),
+            np.concatenate((fixed, centre)), SMOOTH_CENTRE_WEIGHT)[2:]
+        verts = verts.copy()
+        verts[first:] = origin + lat[:, None] * normal
+        centre, half = lat, np.minimum(half, SMOOTH_TOLERANCE)
+    kept = first + band_simplify(verts[first:], origin, tangent, normal, centre, half)
     # long legs get extra control points on them (they stay within the bands)
     vst = vs[ahead]
+    legs = np.column_stack((np.concatenate(([first], kept[:-1])), kept))
+    leg_len = np.hypot(*(verts[legs[:, 1]] - verts[legs[:, 0]]).T)
     extra_xy, extra_s = [], []
-    for a, b in zip(np.concatenate(([first], kept[:-1])).tolist(), kept.tolist(), strict=True):
-        pieces = int(np.ceil(np.hypot(*(verts[b] - verts[a])) / params.max_control_spacing
-                             - 1e-9))
-        if a == b or pieces <= 1:
+    for j, (a, b) in enumerate(legs.tolist()):
+        if a == b:
             continue
-        f = np.arange(1, pieces) / pieces
+        if smooth:
+            f = _leg_splits(float(leg_len[j]), float(leg_len[j - 1]) if j > 0 else np.inf,
+                            float(leg_len[j + 1]) if j + 1 < len(legs) else np.inf,
+                            params.max_control_spacing, LEG_GROWTH)
+        else:
+            pieces = int(np.ceil(leg_len[j] / params.max_control_spacing - 1e-9))
+            f = np.arange(1, pieces) / max(pieces, 1)
+        if len(f) == 0:
+            continue
         extra_xy.append(verts[a] + f[:, None] * (verts[b] - verts[a]))
         extra_s.append(vst[a] + f * (vst[b] - vst[a]))
     counts = np.zeros(len(verts), dtype=np.int64)
@@ -782,6 +867,150 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
         counts = np.insert(counts, at, 1)
     pool = np.vstack((start, heading_point, verts))
     return pool, np.concatenate(([1, 1], counts)).astype(np.int64)
+
+
+#: Weight [1/m^2] that pulls the least-bending polygon towards level 2's path (its share of
+#: the objective against the bending, so that straights among obstacles keep to the path).
+SMOOTH_CENTRE_WEIGHT = 1e-4
+#: Half width [m] of the bands within which band simplification drops vertices of the
+#: least-bending polygon.
+SMOOTH_TOLERANCE = 0.05
+#: Largest ratio of two neighbouring legs of the smooth control polygon.
+LEG_GROWTH = 2.0
+
+
+def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
+                           hi: FloatArray, centre: FloatArray, weight: float,
+                           max_rounds: int = 30) -> FloatArray:
+    """Lateral offsets ``(m,)`` [m] of the points ``origin + l * normal`` that minimise the
+    sum of squared second differences of the points (the discrete bending of the polyline)
+    plus ``weight`` times the squared distance of ``l`` to ``centre``, within ``lo <= l <=
+    hi``.
+
+    Equation (3) moves a point to its neighbours' mean, which drives exactly this sum down;
+    this is its fixed point within the bands, found at once: the Hessian is banded
+    (pentadiagonal), solved by banded Cholesky inside a primal active-set loop.
+    """
+    from scipy.linalg import solveh_banded
+
+    m = len(origin)
+    if m < 3:
+        return np.clip(centre, lo, hi)
+    # second differences D (m - 2, m) for uneven spacing (curvature-like, weighted by the
+    # length each one stands for); M = D^T D is pentadiagonal
+    h = np.maximum(np.hypot(*np.diff(origin, axis=0).T), 1e-3)
+    w = np.sqrt(2.0 / (h[:-1] + h[1:]))  # 2 / (h0 + h1) * sqrt((h0 + h1) / 2)
+    coef = np.column_stack((w / h[:-1], -w * (1.0 / h[:-1] + 1.0 / h[1:]), w / h[1:]))
+    m0 = np.zeros(m)
+    m1 = np.zeros(m - 1)
+    for a in range(3):
+        m0[a:m - 2 + a] += coef[:, a] ** 2
+    for a in range(2):
+        m1[a:m - 2 + a] += coef[:, a] * coef[:, a + 1]
+    m2 = coef[:, 0] * coef[:, 2]
+    nn1 = np.einsum("ij,ij->i", normal[:-1], normal[1:])
+    nn2 = np.einsum("ij,ij->i", normal[:-2], normal[2:])
+    n0 = np.einsum("ij,ij->i", normal, normal)
+    # (a tiny ridge keeps the system definite where nothing else pins the offsets down)
+    h0, h1, h2 = m0 * n0 + weight + 1e-9, m1 * nn1, m2 * nn2
+    second = (coef[:, 0, None] * origin[:-2] + coef[:, 1, None] * origin[1:-1]
+              + coef[:, 2, None] * origin[2:])  # D @ origin
+    dt = np.zeros((m, 2))  # D^T @ second
+    dt[:-2] += coef[:, 0, None] * second
+    dt[1:-1] += coef[:, 1, None] * second
+    dt[2:] += coef[:, 2, None] * second
+    g = np.einsum("ij,ij->i", normal, dt) - weight * centre
+
+    def hess(x: FloatArray) -> FloatArray:
+        y = h0 * x
+        y[:-1] += h1 * x[1:]
+        y[1:] += h1 * x[:-1]
+        y[:-2] += h2 * x[2:]
+        y[2:] += h2 * x[:-2]
+        return y
+
+    fixed = lo >= hi
+
+    def solve(at_lo: NDArray[np.bool_], at_hi: NDArray[np.bool_]) -> FloatArray:
+        """Minimum with the offsets in ``at_lo`` / ``at_hi`` held at those bounds (by a
+        stiff penalty, which keeps the system banded)."""
+        act = at_lo | at_hi
+        ab = np.zeros((3, m))
+        ab[2] = h0 + _PIN * act
+        ab[1, 1:] = h1
+        ab[0, 2:] = h2
+        rhs = -g + _PIN * np.where(at_lo, lo, np.where(at_hi, hi, 0.0))
+        return solveh_banded(ab, rhs, lower=False, check_finite=False)
+
+    # primal-dual active set: fast, usually exact, but not guaranteed to settle
+    at_lo = np.zeros(m, dtype=bool)
+    at_hi = fixed.copy()
+    for _ in range(max_rounds):
+        x = solve(at_lo, at_hi)
+        grad = hess(x) + g
+        new_lo = ((at_lo & (grad >= 0)) | (x < lo - 1e-9)) & ~fixed
+        new_hi = ((at_hi & (grad <= 0)) | (x > hi + 1e-9)) & ~new_lo | fixed
+        if np.array_equal(new_lo, at_lo) and np.array_equal(new_hi, at_hi):
+            break
+        at_lo, at_hi = new_lo, new_hi
+    # primal active set from there: each step stays within the bounds and lowers the
+    # objective, so it ends at the optimum
+    x = np.clip(x, lo, hi)
+    at_lo = (x <= lo) & ~fixed
+    at_hi = (x >= hi) | fixed
+    for _ in range(4 * m + 10):
+        y = solve(at_lo, at_hi)
+        free = ~(at_lo | at_hi)
+        out = free & ((y < lo) | (y > hi))
+        if not out.any():
+            x = np.where(free, y, x)
+            grad = hess(x) + g
+            wrong = np.where(at_lo, -grad, 0.0) + np.where(at_hi & ~fixed, grad, 0.0)
+            i = int(np.argmax(wrong))
+            if wrong[i] <= 1e-9 * (1.0 + float(np.abs(grad).max())):
+                break
+            at_lo[i] = at_hi[i] = False
+            continue
+        d = y - x
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(d < 0, (lo - x) / d, np.where(d > 0, (hi - x) / d, np.inf))
+        room = np.where(free, np.clip(room, 0.0, None), np.inf)
+        j = int(np.argmin(room))
+        x = np.where(free, x + min(float(room[j]), 1.0) * d, x)
+        at_lo[j], at_hi[j] = d[j] < 0, d[j] > 0
+    return np.clip(x, lo, hi)
+
+
+#: Stiffness that holds an offset at its bound in :func:`min_bending_offsets`.
+_PIN = 1e8
+
+
+def _leg_splits(length: float, before: float, after: float, cap: float, ratio: float
+                ) -> FloatArray:
+    """Fractions ``(k,)`` of a control-polygon leg of ``length`` [m] at which to split it so
+    that no piece is longer than ``cap`` [m] nor ``ratio`` times its neighbour: pieces grow
+    geometrically from the legs ``before`` and ``after`` it (their lengths [m]).
+
+    A uniform B-spline turns within its shortest legs, so a short leg beside a long one
+    gives a sharp bend that the control polygon does not have.
+    """
+    cuts_a, cuts_b = [], []
+    pos, step = 0.0, min(max(ratio * before, 0.5), cap)
+    while pos + step < length / 2.0:
+        pos += step
+        cuts_a.append(pos)
+        step = min(step * ratio, cap)
+    pos, step = length, min(max(ratio * after, 0.5), cap)
+    while pos - step > length / 2.0:
+        pos -= step
+        cuts_b.append(pos)
+        step = min(step * ratio, cap)
+    lo = cuts_a[-1] if cuts_a else 0.0
+    hi = cuts_b[-1] if cuts_b else length
+    mid = int(np.ceil((hi - lo) / cap - 1e-9))
+    cuts = np.concatenate((cuts_a, lo + (hi - lo) * np.arange(1, mid) / max(mid, 1),
+                           cuts_b[::-1]))
+    return np.asarray(cuts, dtype=float) / length
 
 
 #: Lateral grid step [m] of :func:`detour_roadmap`'s search.
@@ -832,16 +1061,27 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     r = int(np.floor(rate * float(ds.max()) / h + 1e-9))
     dlt = np.arange(-r, r + 1)
     frm = np.arange(nb)[:, None] - dlt[None, :]
-    inside = (frm >= 0) & (frm < nb)
-    fv = np.where(inside[None], vid[:-1][:, np.clip(frm, 0, nb - 1)], -1)
-    tv = vid[1:][:, :, None]
+    # arcs as tables per pair of lines, (lines - 1, P + 1, P + 1), over each vertex's index
+    # on its line (P: none, never connected)
+    by_line = np.argsort(line, kind="stable")
+    loc = np.empty(n_v, dtype=np.int64)
+    loc[by_line] = np.arange(n_v) - np.searchsorted(line[by_line], line[by_line])
+    n_loc = int(loc.max()) + 1
     arcs = np.asarray(roadmap.arcs, dtype=np.int64)
-    keys = np.sort(arcs[:, 0] * n_v + arcs[:, 1])
-    key = fv * n_v + tv
-    at = np.minimum(np.searchsorted(keys, key), len(keys) - 1)
-    ok = (fv >= 0) & (tv >= 0) & (keys[at] == key)
+    arcs = arcs[line[arcs[:, 1]] == line[arcs[:, 0]] + 1]
+    table = np.zeros((n_lines - 1, n_loc + 1, n_loc + 1), dtype=bool)
+    table[line[arcs[:, 0]], loc[arcs[:, 0]], loc[arcs[:, 1]]] = True
+    lid = np.full((n_lines, nb + 2 * r), n_loc)  # padded by r bins of none on each side
+    lid[:, r:r + nb] = np.where(vid >= 0, loc[vid], n_loc)
+    # flat index into the tables: (line, from, to)
+    flat = lid[:-1][:, frm + r]
+    flat += (n_loc + 1) * np.arange(n_lines - 1)[:, None, None]
+    flat *= n_loc + 1
+    flat += lid[1:, r:r + nb, None]
+    ok = table.ravel()[flat]
     ok &= np.abs(dlt)[None, None, :] * h <= rate * ds[:, None, None] + 1e-9
     lat_cost = (dlt[None, :] * h) ** 2 / ds[:, None]  # (lines - 1, 2r + 1)
+    step_cost = np.where(ok, lat_cost[:, None, :], np.inf)  # (lines - 1, nb, 2r + 1)
     frm_c = np.clip(frm, 0, nb - 1)
     # start: the source vertex, at the vehicle's offset
     src = int(roadmap.path[0])
@@ -851,16 +1091,16 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     back = np.zeros((n_lines, nb), dtype=np.int64)
     rows = np.arange(nb)
     for k in range(n_lines - 1):
-        cand = np.where(ok[k], cost[frm_c] + lat_cost[k], np.inf)
+        cand = cost[frm_c] + step_cost[k]
         j = np.argmin(cand, axis=1)
         cost = cand[rows, j] + penalty[k + 1]
-        back[k + 1] = frm_c[rows, j]
+        back[k + 1] = j
     if not np.isfinite(cost).any():
         return None
     bins = np.zeros(n_lines, dtype=np.int64)
     bins[-1] = int(np.argmin(cost))
     for k in range(n_lines - 1, 0, -1):
-        bins[k - 1] = back[k, bins[k]]
+        bins[k - 1] = frm_c[bins[k], back[k, bins[k]]]
     ks = np.arange(n_lines)
     path = vid[ks, bins]
     lat = lv[ks, bins]
@@ -987,11 +1227,14 @@ def _farthest_upto(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: Flo
     a1, a2, th = ang[:, 0], ang[:, 1], ang[:, 2]
     lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
     # a line through p itself does not constrain the direction
-    on = np.abs(np.einsum("kd,kd->k", origin[ks] - p, tangent[ks])) < 1e-9
+    o, t = origin[ks], tangent[ks]
+    on = np.abs((o[:, 0] - p[0]) * t[:, 0] + (o[:, 1] - p[1]) * t[:, 1]) < 1e-9
     lo[on], hi[on] = -np.inf, np.inf
     # bounds from the lines strictly before each candidate
-    low = np.maximum.accumulate(np.concatenate(([-np.inf], lo[:-1])))
-    high = np.minimum.accumulate(np.concatenate(([np.inf], hi[:-1])))
+    low, high = np.empty(len(lo)), np.empty(len(hi))
+    low[0], high[0] = -np.inf, np.inf
+    np.maximum.accumulate(lo[:-1], out=low[1:])
+    np.minimum.accumulate(hi[:-1], out=high[1:])
     good = (th >= low - tol) & (th <= high + tol)
     good[0] = True
     if good.all():
@@ -1004,7 +1247,7 @@ class _Curve:
     """A clamped B-spline on fixed parameter samples, with its basis there.
 
     ``first[j]`` is the first of the ``k + 1`` control points that shape sample ``j``;
-    ``basis[nu, j]`` their values (nu = 0) and parameter derivatives (nu = 1, 2) there.
+    ``basis[nu, :, j]`` their values (nu = 0) and parameter derivatives (nu = 1, 2) there.
     ``pool_index`` maps each control point to its index among the candidates.
     """
 
@@ -1026,7 +1269,9 @@ class _Curve:
         # lengthen a leg beyond the longest of its neighbours
         legs = np.hypot(*np.diff(ctrl, axis=0).T)
         padded = np.concatenate(([legs[0]], legs, [legs[-1]]))
-        span_len = sliding_window_view(padded, k + 2)[:n - k].max(axis=1)
+        span_len = padded[:n - k].copy()  # the longest of the k + 2 legs around each span
+        for j in range(1, k + 2):
+            np.maximum(span_len, padded[j:j + n - k], out=span_len)
         per = np.clip(np.ceil(span_len / spacing).astype(int) + 1, 2, 400)
         inner = knots[k:n + 1]
         # per span, evenly spaced from its start (as np.linspace without the end point)
@@ -1040,10 +1285,16 @@ class _Curve:
                                                                   FloatArray]:
         """Positions, first and second parameter derivatives ``(m, 2)`` at the samples."""
         c = self.ctrl if ctrl is None else ctrl
-        cols = self.first[:, None] + np.arange(self.k + 1)[None, :]
-        gathered = c[cols]
-        return tuple(np.einsum("mk,mkd->md", self.basis[nu], gathered)  # type: ignore
-                     for nu in range(3))
+        cols = self.first + np.arange(self.k + 1)[:, None]
+        gx, gy = c[:, 0][cols], c[:, 1][cols]  # (k + 1, m)
+        out = []
+        for b in self.basis:
+            x, y = b[0] * gx[0], b[0] * gy[0]
+            for j in range(1, self.k + 1):
+                x += b[j] * gx[j]
+                y += b[j] * gy[j]
+            out.append(np.column_stack((x, y)))
+        return out[0], out[1], out[2]
 
 
 def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
@@ -1201,7 +1452,7 @@ class _Optimiser:
             idx = np.arange(int(lens.sum())) + np.repeat(lo - np.cumsum(lens) + lens, lens)
         r = moves[owner] - self.first[idx]  # column of the moved point in each sample's row
         dlt = delta[owner]
-        b = self.basis[:, idx, r]  # (3, q)
+        b = self.basis[:, r, idx]  # (3, q)
         pos = self.pos[idx] + b[0, :, None] * dlt
         d1 = self.d1[idx] + b[1, :, None] * dlt
         d2 = self.d2[idx] + b[2, :, None] * dlt
@@ -1212,15 +1463,12 @@ class _Optimiser:
         bad = (old_s >= 0) & (slack < 0)
         # per move: the worst violation of the changed stretch (curvature beyond the turning
         # limit, footprint within the margin) does not grow
-        worse = np.zeros(nm, dtype=bool)
-        np.logical_or.at(worse, owner, bad)
+        starts = np.cumsum(lens) - lens  # each move's samples: one run, never empty
+        worse = np.logical_or.reduceat(bad, starts)
         limits = ((kap, old_k, p.kappa_max), (-slack, -old_s, 0.0))
         for new, old, lim in limits:
-            mx_new = np.full(nm, -np.inf)
-            mx_old = np.full(nm, -np.inf)
-            np.maximum.at(mx_new, owner, new)
-            np.maximum.at(mx_old, owner, old)
-            worse |= mx_new > np.maximum(mx_old, lim) + 1e-12
+            worse |= (np.maximum.reduceat(new, starts)
+                      > np.maximum(np.maximum.reduceat(old, starts), lim) + 1e-12)
         acc = ~worse
         keep = acc[owner]
         ki = idx[keep]
@@ -1237,12 +1485,12 @@ def _independent(bad: FloatArray, k: int, budget: int) -> list[int]:
     """Control points to move this round: the worst first, then others ``k + 1`` apart."""
     order = np.argsort(-bad, kind="stable")
     order = order[bad[order] > 0]
-    taken = np.zeros(len(bad) + 2 * k + 2, dtype=bool)
+    taken = [False] * (len(bad) + 2 * k + 2)  # a list: a few short slices, no array calls
     chosen: list[int] = []
     for i in order.tolist():
         if len(chosen) >= budget:
             break
-        if taken[i: i + 2 * k + 1].any():
+        if any(taken[i: i + 2 * k + 1]):
             continue
         taken[i + k] = True  # offset by k so that i - k >= 0
         chosen.append(i)

@@ -80,3 +80,19 @@ def best_clearance(
         else:
             hi = mid - 1
     return OracleResult(float(levels[lo]), clearance, (x0, y0), step)
+
+
+def paved_area(net_path: str) -> shapely.Geometry:
+    """The paved area of a SUMO network by sumolib and shapely alone: every lane (normal
+    and internal) as a band of its width around its centre line, and every junction
+    outline."""
+    import sumolib
+    from shapely.geometry import LineString
+    from shapely.ops import unary_union
+
+    snet = sumolib.net.readNet(str(net_path), withInternal=True)
+    parts = [LineString(ln.getShape()).buffer(ln.getWidth() / 2.0, cap_style=2)
+             for e in snet.getEdges(withInternal=True) for ln in e.getLanes()
+             if len(ln.getShape()) >= 2]
+    parts += [Polygon(j.getShape()) for j in snet.getNodes() if len(j.getShape()) >= 3]
+    return unary_union([p for p in parts if p.is_valid])

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import NETS
+from oracle import paved_area
 from shapely.geometry import Point, Polygon
 
 from splineplan.errors import NetworkError, UnknownEdgeError, VehicleClassError
@@ -149,3 +150,26 @@ def test_corridor_city() -> None:
     wp = np.subtract(*cor_p.bounds_at(s_p)[::-1])
     wb = np.subtract(*cor_b.bounds_at(s_b)[::-1])
     assert wp == pytest.approx(3.2, abs=1e-6) and wb == pytest.approx(6.4, abs=1e-6)
+
+
+
+@pytest.mark.parametrize(("start", "goal"), [
+    ("A1B1", "B1B0"),  # right turn
+    ("B0C0", "C0C1"),  # left turn
+    ("C0C1", "C1D1"),  # right turn
+    ("C3D3", "B1A1"),  # a corner of the grid and turns
+    ("A2A3", "D0D1"),
+])
+def test_corridor_through_junctions_is_paved_and_wide(start: str, goal: str) -> None:
+    """Through a junction the corridor spans from the allowed lanes of one edge to those
+    of the next (the kerb rounded as SUMO rounds it), not only the internal lanes' band,
+    and stays on the paved area (lanes and junction outlines)."""
+    path = NETS / "grid.net.xml"
+    net = load_network(path)
+    route = shortest_route(net, start, goal, turnarounds=False)
+    cor = route_corridor(net, route)
+    # both directions have two 3.2 m lanes: the corridor is never narrower than those
+    assert float(np.min(cor.left - cor.right)) >= 6.4 - 0.05
+    outside = Polygon(cor.polygon()).buffer(0).difference(paved_area(path).buffer(0.05))
+    junctions = len(route.edges) - 1
+    assert outside.area <= 0.5 * max(junctions, 1), outside.area

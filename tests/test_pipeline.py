@@ -124,3 +124,34 @@ def test_monaco_routes_plan_forward(monaco_net) -> None:
         tr = result.trajectory
         assert np.hypot(np.diff(tr.x), np.diff(tr.y)).max() < 2.0
         assert tr.s[-1] == pytest.approx(cor.length, rel=0.05)
+
+
+@pytest.mark.parametrize(("start", "goal"), [
+    ("A1B1", "B1B0"),  # right turn
+    ("B0C0", "C0C1"),  # left turn
+    ("C0C1", "C1D1"),  # right turn
+    ("C2C1", "C2B2"),  # turns at a corner of the grid
+    ("B1C1", "C2D2"),
+])
+def test_junction_turns_are_feasible_and_stay_on_the_pavement(grid, start: str,
+                                                              goal: str) -> None:
+    """Through SUMO's junctions the trajectory keeps the turning limit and the margin, and
+    the vehicle's footprint stays on the paved area (shapely, from sumolib's lanes and
+    junction outlines)."""
+    from oracle import paved_area
+    from shapely import affinity
+    from shapely.geometry import box
+    from shapely.ops import unary_union
+
+    result = plan(grid, start, goal)
+    tr = result.trajectory
+    rp = result.roadmaps[0].params
+    assert tr.feasible
+    assert float(np.max(np.abs(tr.curvature))) <= 1.0 / 5.0 + 1e-9
+    base = box(-rp.vehicle_length / 2, -rp.vehicle_width / 2,
+               rp.vehicle_length / 2, rp.vehicle_width / 2)
+    swept = unary_union([
+        affinity.translate(affinity.rotate(base, h, origin=(0, 0), use_radians=True), x, y)
+        for x, y, h in zip(tr.x[::2], tr.y[::2], tr.heading[::2], strict=True)])
+    outside = swept.difference(paved_area(NETS / "grid.net.xml"))
+    assert outside.area < 0.05, outside.area

@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import NETS, ROOT
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
 from splineplan.errors import (
@@ -50,6 +52,20 @@ def _fcd(path: Path) -> dict[float, dict[str, tuple[float, float, float, float]]
         out[t] = {v.get("id", ""): (float(v.get("x", "nan")), float(v.get("y", "nan")),
                                     float(v.get("angle", "nan")), float(v.get("speed", "nan")))
                   for v in step.iter("vehicle")}
+    return out
+
+
+def _vehicle_sizes(*paths: Path) -> dict[str, tuple[float, float]]:
+    """Length and width [m] of each vehicle, trip and flow of SUMO route files, by id."""
+    types: dict[str, tuple[float, float]] = {}
+    out: dict[str, tuple[float, float]] = {}
+    for path in paths:
+        root = ET.parse(path).getroot()
+        for t in root.iter("vType"):
+            types[t.get("id", "")] = (float(t.get("length", "5")), float(t.get("width", "1.8")))
+        for tag in ("vehicle", "trip", "flow"):
+            for v in root.iter(tag):
+                out[v.get("id", "")] = types.get(v.get("type", ""), (5.0, 1.8))
     return out
 
 
@@ -196,24 +212,27 @@ def test_city_scenario_drives_the_level1_route(runs: dict[str, SimResult]) -> No
 
 
 def test_car_alongside_is_planned_around(tmp_path: Path) -> None:
-    """The first 80 s of the city among busy traffic: after a right turn onto a two-lane
-    road, car ``bg32`` comes up alongside on the other lane. The ego's widest path would
-    drift to the middle of the road (into it); the car becomes a swept obstacle and the ego
-    keeps its side. Checked on SUMO's own record, with shapely."""
+    """The first 80 s of the city among busy traffic: on two-lane roads cars come up
+    alongside on the other lane. The ego's widest path would drift to the middle of the
+    road (into them); each such car becomes a swept obstacle and the ego keeps its side.
+    Checked on SUMO's own record, with shapely."""
     sc = load_scenario(SCENARIOS / "city_traffic.toml")
     short = dataclasses.replace(sc, sim=dataclasses.replace(sc.sim, duration=80.0))
     r = simulate(short, out_dir=tmp_path, progress=False)
     m = r.metrics
     assert r.status == "timeout" and m["collisions"] == 0, m["collision_events"][:3]
     assert m["time_off_road"] == 0.0
-    traffic = [p for p in r.replans if p.reason == "traffic"]
-    assert any("'bg32'" in p.detail and p.ok for p in traffic)
+    beside = {p.detail.split("'")[1] for p in r.replans
+              if p.reason == "traffic" and p.ok and "beside the ego" in p.detail}
+    assert beside
     assert m["min_clearance_vehicles"] > 0.2
     fcd = _fcd(tmp_path / "fcd.xml")
-    gaps = [_sumo_box(*v["ego"][:3], sc.ego.length, sc.ego.width).distance(
-                _sumo_box(*v["bg32"][:3], 4.5, 1.8))
-            for v in fcd.values() if "ego" in v and "bg32" in v]
-    assert len(gaps) > 30 and min(gaps) > 0.2
+    size = _vehicle_sizes(SCENARIOS / "city.rou.xml", SCENARIOS / "city_traffic.rou.xml")
+    gaps = {car: [_sumo_box(*v["ego"][:3], sc.ego.length, sc.ego.width).distance(
+                      _sumo_box(*v[car][:3], *size[car.split(".")[0]]))
+                  for v in fcd.values() if "ego" in v and car in v] for car in beside}
+    assert max(len(g) for g in gaps.values()) > 30
+    assert min(min(g) for g in gaps.values() if g) > 0.2
     # SUMO's messages went to its log, the console stays clean
     assert "emergency braking" in (tmp_path / "sumo.log").read_text()
     assert m["wall_time_sumo"] > 0 and m["wall_time_planner"] > 0 and m["wall_time_loop"] > 0
@@ -368,6 +387,84 @@ def test_road_check_matches_shapely_lane_bands() -> None:
         agree += 1
         off += not want
     assert agree > 2000 and 50 < off < agree - 500
+
+
+# ---- the per-step checks' shortcuts: never less strict than the exact checks ---------------
+
+_coord = st.floats(-30.0, 30.0, allow_nan=False)
+_size = st.floats(0.5, 12.0, allow_nan=False)
+_angle = st.floats(-4.0, 4.0, allow_nan=False)
+
+
+@settings(max_examples=60, deadline=None)
+@given(x=_coord, y=_coord, h=_angle, length=_size, width=_size, ox=_coord, oy=_coord,
+       oh=_angle, olength=_size, owidth=_size)
+def test_bounding_circles_never_drop_a_collision(x: float, y: float, h: float, length: float,
+                                                  width: float, ox: float, oy: float,
+                                                  oh: float, olength: float,
+                                                  owidth: float) -> None:
+    """The safety check measures exactly only the vehicles whose bounding circles come within
+    2 m of the ego's: their gap is a lower bound of the rectangles' distance (shapely)."""
+    from splineplan.metrics import rectangle_distances
+
+    bound = math.dist((x, y), (ox, oy)) - 0.5 * (math.hypot(length, width)
+                                                 + math.hypot(olength, owidth))
+    exact = Polygon(footprint([x, y], h, length, width)).distance(
+        Polygon(footprint([ox, oy], oh, olength, owidth)))
+    assert bound <= exact + 1e-9
+    got = rectangle_distances((x, y), h, length, width, [[ox, oy]], [oh], [olength], [owidth])
+    assert got[0] == pytest.approx(exact, abs=1e-9)
+
+
+@settings(max_examples=60, deadline=None)
+@given(cx=_coord, cy=_coord, h=_angle, length=_size, width=_size, reach=st.floats(0.1, 2.0),
+       seed=st.integers(0, 2**16))
+def test_path_samples_in_reach_are_in_the_bounding_circle(cx: float, cy: float, h: float,
+                                                          length: float, width: float,
+                                                          reach: float, seed: int) -> None:
+    """The time-gap check looks only at the path samples within a vehicle's bounding circle
+    plus the reach (one k-d tree query); any sample within reach of its probe points is
+    among them, and the first one found with plain floats is numpy's first."""
+    from scipy.spatial import cKDTree
+
+    from splineplan.sim import _first_in_reach, _probe_points
+
+    rng = np.random.default_rng(seed)
+    samples = np.column_stack((cx + rng.uniform(-10, 10, 200), cy + rng.uniform(-10, 10, 200)))
+    pts = _probe_points(cx, cy, math.cos(h), math.sin(h), length / 2.0, width / 2.0)
+    d2 = ((np.asarray(pts)[:, None, :] - samples[None]) ** 2).sum(axis=2)  # (9, m)
+    want = np.flatnonzero((d2 <= reach * reach).any(axis=0))
+    ball = cKDTree(samples).query_ball_point([[cx, cy]], [0.5 * math.hypot(length, width)
+                                                          + reach], return_sorted=True)[0]
+    assert set(want.tolist()) <= set(ball)
+    k0 = int(rng.integers(0, len(ball) + 1))
+    later = want[want >= (ball[k0] if k0 < len(ball) else len(samples))]
+    got = _first_in_reach(pts, ball, k0, samples[:, 0].tolist(), samples[:, 1].tolist(),
+                          reach * reach)
+    assert got == (int(later[0]) if len(later) else -1)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**16), n_seg=st.integers(1, 6))
+def test_lane_bands_with_plain_floats_match_arrays(seed: int, n_seg: int) -> None:
+    """The road check's common case (the footprint against the lane segments that held it
+    last step, with plain floats) agrees with the array version."""
+    from splineplan.sim import _in_bands, _in_rows
+
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(-10, 10, (n_seg, 2))
+    ab = rng.uniform(-8, 8, (n_seg, 2))
+    ab[0] = 0.0  # a zero-length segment
+    ln2 = (ab**2).sum(axis=1)
+    segs = (a[:, 0], a[:, 1], ab[:, 0], ab[:, 1], 1.0 / np.where(ln2 > 0, ln2, 1.0),
+            rng.uniform(0.5, 3.0, n_seg) ** 2)
+    rows = list(zip(*(v.tolist() for v in segs), strict=True))
+    for _ in range(20):
+        pts = rng.uniform(-12, 12, (8, 2))
+        assert _in_rows(pts.tolist(), rows) == bool(_in_bands(pts, segs).all())
+        pick = rng.integers(0, n_seg, 8)
+        near = a[pick] + rng.uniform(0, 1, (8, 1)) * ab[pick] + rng.uniform(-1, 1, (8, 2))
+        assert _in_rows(near.tolist(), rows) == bool(_in_bands(near, segs).all())
 
 
 # ---- bad input and failures: a clear error, and the record written ------------------------

@@ -331,6 +331,33 @@ def test_start_heading_is_followed() -> None:
         assert tr.heading[0] == pytest.approx(h, abs=1e-9)
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.lists(st.tuples(st.floats(-7.0, 7.0), st.floats(-7.0, 7.0),
+                          st.floats(-np.pi, np.pi)), min_size=1, max_size=12))
+def test_footprint_obstacle_distance_matches_shapely(poses: list[tuple[float, float, float]]
+                                                     ) -> None:
+    """The footprint-to-obstacle distance equals shapely's (0 on overlap) for a box, a
+    non-convex polygon and a polygon large enough to hold the footprint, at poses apart
+    from, touching, crossing and inside them."""
+    from splineplan.trajectory import _Checker
+
+    polys = [np.array([[1.0, 1.0], [3.0, 1.5], [2.5, 3.0], [0.5, 2.5]]),
+             np.array([[-4, -4], [0, -4], [0, -3], [-3, -3], [-3, 0], [-4, 0]], float),
+             np.array([[4.0, -6.0], [9.0, -6.0], [9.0, 0.0], [4.0, 0.0]])]
+    obstacles = Obstacles.from_polygons(polys)
+    rp = RoadmapParams()
+    xy = np.array([(x, y) for x, y, _ in poses])
+    heading = np.array([h for _, _, h in poses])
+    checker = _Checker.build(straight_road(40.0), obstacles, rp, xy)
+    got = checker.obstacles(xy, heading, horizon=50.0)
+    hl, hw = rp.vehicle_length / 2.0, rp.vehicle_width / 2.0
+    shapes = [Polygon(p) for p in polys]
+    for j, (x, y, h) in enumerate(poses):
+        foot = affinity.translate(affinity.rotate(box(-hl, -hw, hl, hw), h, use_radians=True,
+                                                  origin=(0, 0)), x, y)
+        assert got[j] == pytest.approx(min(foot.distance(s) for s in shapes), abs=1e-9)
+
+
 # ---- band simplification and obstacle fields (real level 2) -------------------------------
 def shapely_check_corridor(tr: Trajectory, corridor: Corridor, obstacles: Obstacles,
                            rp: RoadmapParams, tol: float = 1e-6) -> tuple[int, int]:
@@ -472,3 +499,47 @@ def test_random_obstacle_fields_mostly_feasible() -> None:
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12), curved=st.booleans())
 def test_random_obstacle_fields_real_roadmap_slow(seed: int, n: int, curved: bool) -> None:
     _random_fields(seed, n, curved)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(0, 2**32 - 1), st.integers(3, 60), st.sampled_from([0.0, 1e-4, 0.1]))
+def test_min_bending_offsets_solves_its_least_squares_problem(seed: int, m: int,
+                                                               weight: float) -> None:
+    """The banded active-set solver reaches the optimum of the bounded least-squares
+    problem it states, as scipy's general solver finds it (random lines, bands, fixed
+    points)."""
+    import scipy.sparse as sp
+    from scipy.optimize import lsq_linear
+
+    from splineplan.trajectory import min_bending_offsets
+
+    rng = np.random.default_rng(seed)
+    heading = np.cumsum(rng.normal(0.0, 0.3, m))
+    step = rng.uniform(0.3, 3.0, m)
+    origin = np.column_stack((np.cumsum(step * np.cos(heading)),
+                              np.cumsum(step * np.sin(heading))))
+    normal = np.column_stack((-np.sin(heading), np.cos(heading)))
+    centre = rng.uniform(-1.0, 1.0, m)
+    lo, hi = centre - rng.uniform(0.0, 2.0, m), centre + rng.uniform(0.0, 2.0, m)
+    fixed = rng.random(m) < 0.1
+    lo[fixed] = hi[fixed] = centre[fixed]
+    got = min_bending_offsets(origin, normal, lo, hi, centre, weight)
+    assert np.all(got >= lo - 1e-9) and np.all(got <= hi + 1e-9)
+    # the same objective, written out: second differences for uneven spacing
+    h = np.hypot(*np.diff(origin, axis=0).T)
+    rows = []
+    for r in range(m - 2):
+        w = np.sqrt(2.0 / (h[r] + h[r + 1]))
+        row = np.zeros(m)
+        row[r:r + 3] = w * np.array([1 / h[r], -(1 / h[r] + 1 / h[r + 1]), 1 / h[r + 1]])
+        rows.append(row)
+    d = np.array(rows)
+    a = np.vstack((d * normal[:, 0], d * normal[:, 1], np.sqrt(weight) * np.eye(m)))
+    b = np.concatenate((-(d @ origin[:, 0]), -(d @ origin[:, 1]), np.sqrt(weight) * centre))
+    ref = lsq_linear(sp.csr_matrix(a), b, bounds=(lo, np.where(fixed, hi + 1e-12, hi)),
+                     tol=1e-12).x
+
+    def cost(x: np.ndarray) -> float:
+        return float(np.sum((a @ x - b) ** 2))
+
+    assert cost(got) <= cost(ref) + 1e-6 * (1.0 + cost(ref))
