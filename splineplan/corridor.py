@@ -21,6 +21,10 @@ from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations, 
 REFERENCE_SPACING = 0.5
 
 
+#: Offset [m] that stands for "no bound" in a corridor's keep offsets.
+UNBOUNDED = 1e9
+
+
 @dataclass(frozen=True, eq=False)
 class Corridor:
     """Drivable road stretch in a Frenet frame.
@@ -40,6 +44,11 @@ class Corridor:
         Station ``(len(edges),)`` [m] at which each edge begins.
     offset
         Station [m] of this corridor's start on the whole route, for messages.
+    keep_left, keep_right
+        Lateral offsets ``(n,)`` [m] between which the vehicle's centre keeps (the lanes
+        that lead on along the route, before a junction), :data:`UNBOUNDED` where the
+        whole road will do; ``None``: nowhere bounded. The footprint keeps to ``left``
+        and ``right``.
     """
 
     reference: FloatArray
@@ -49,6 +58,8 @@ class Corridor:
     edges: tuple[str, ...] = ()
     edge_starts: FloatArray = field(default_factory=lambda: np.zeros(0))
     offset: float = 0.0
+    keep_left: FloatArray | None = None
+    keep_right: FloatArray | None = None
     _tree: cKDTree = field(init=False, repr=False)
     _heading: FloatArray = field(init=False, repr=False)
     _cos: FloatArray = field(init=False, repr=False)
@@ -64,8 +75,15 @@ class Corridor:
             )
         if len(self.edges) != len(self.edge_starts):
             raise GeometryError("corridor needs one start station per edge")
-        for name in ("reference", "s", "left", "right", "edge_starts"):
-            getattr(self, name).setflags(write=False)
+        if (self.keep_left is None) != (self.keep_right is None) or (
+                self.keep_left is not None and self.keep_right is not None
+                and (self.keep_left.shape != self.s.shape
+                     or self.keep_right.shape != self.s.shape)):
+            raise GeometryError("corridor needs both keep offsets, one per station, or none")
+        for name in ("reference", "s", "left", "right", "edge_starts", "keep_left",
+                     "keep_right"):
+            if getattr(self, name) is not None:
+                getattr(self, name).setflags(write=False)
         d = np.diff(self.reference, axis=0)
         object.__setattr__(self, "_heading", np.arctan2(d[:, 1], d[:, 0]))
         object.__setattr__(self, "_cos", np.cos(self._heading))
@@ -144,6 +162,14 @@ class Corridor:
         """Right and left boundary offsets [m] at stations ``s``."""
         s = np.asarray(s, dtype=float)
         return np.interp(s, self.s, self.right), np.interp(s, self.s, self.left)
+
+    def keep_at(self, s: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Right and left offsets [m] between which the vehicle's centre keeps at stations
+        ``s`` (:data:`UNBOUNDED` where unbounded)."""
+        s = np.asarray(s, dtype=float)
+        if self.keep_left is None or self.keep_right is None:
+            return np.full(s.shape, -UNBOUNDED), np.full(s.shape, UNBOUNDED)
+        return np.interp(s, self.s, self.keep_right), np.interp(s, self.s, self.keep_left)
 
     def heading_at(self, s: ArrayLike) -> FloatArray:
         """Heading [rad] of the reference line at stations ``s``."""
@@ -232,7 +258,8 @@ class Corridor:
         if len(starts) > 1:  # drop edges that ended before s0
             last_before = np.searchsorted(starts, 0.0, side="right") - 1
             starts, edges = starts[last_before:], edges[last_before:]
-        return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0)
+        kr, kl = ((None, None) if self.keep_left is None else self.keep_at(ss))
+        return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr)
 
     def segments(self, length: float, overlap: float = 0.0) -> list[Corridor]:
         """The corridor cut into pieces of at most ``length`` [m] (the last may be shorter).

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from splineplan.corridor import Corridor
+from splineplan.corridor import UNBOUNDED, Corridor
 from splineplan.errors import (
     GeometryError,
     NetworkError,
@@ -412,8 +412,9 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
 
     On each route edge the area spans from the right side of its rightmost lane that
     ``vclass`` may use to the left side of its leftmost such lane (lanes between them
-    count as drivable). Through a junction it spans from those lanes to the allowed lanes
-    of the next route edge, each side a kerb curve rounded as SUMO rounds a junction's
+    count as drivable). Through a junction it spans from those of its lanes that connect
+    to the next route edge to the allowed lanes of that edge, each side a kerb curve rounded
+    as SUMO rounds a junction's
     corners (:func:`_junction_band`), so that a turn has the room of both roads and not
     only of one internal lane; where the turn is too sharp for that, it spans the internal
     lanes of the allowed connections, from the rightmost to the leftmost. The reference
@@ -434,20 +435,27 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     if not edges:
         raise GeometryError("route has no edges")
     pieces: list[tuple[FloatArray, FloatArray, FloatArray]] = []
+    keep: list[tuple[FloatArray, FloatArray, FloatArray]] = []  # lanes to keep to
     starts: list[int] = []  # index into pieces where each edge's own stretch begins
     for i, eid in enumerate(edges):
         lanes = [ln for ln in network.lanes_of(eid) if ln.allows(cls)]
         if not lanes:
             raise GeometryError(f"vehicle class '{cls}' may use no lane of edge '{eid}'")
         starts.append(len(pieces))
+        conns = ([c for c in network.connections_between(eid, edges[i + 1], vclass=cls)
+                  if c.via] if i + 1 < len(edges) else [])
+        # the lanes that lead on to the next edge: SUMO maps a vehicle into the junction,
+        # and its signals and right of way hold, only from those
+        into = {c.from_lane for c in conns}
+        src = [ln for ln in lanes if ln.index in into] or lanes
         pieces.append(_band(lanes[0].shape, lanes[0].width, lanes[-1].shape, lanes[-1].width))
+        if i > 0 and (src[0] is not lanes[0] or src[-1] is not lanes[-1]):
+            keep.append(_approach_band(src, APPROACH_LENGTH))
         if i + 1 < len(edges):
-            conns = [c for c in network.connections_between(eid, edges[i + 1], vclass=cls)
-                     if c.via]
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
-            nxt = [ln for ln in network.lanes_of(edges[i + 1]) if ln.allows(cls)]
-            fillet = _junction_band(lanes, nxt) if nxt else None
+            dst = [ln for ln in network.lanes_of(edges[i + 1]) if ln.allows(cls)]
+            fillet = _junction_band(lanes, dst) if dst else None
             if fillet is not None:
                 pieces.append(fillet)
                 continue
@@ -471,10 +479,16 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
                                     np.full(len(reference), -1e3))
     left_off, right_off = _union_offsets(probe, pieces)
     left_off, right_off = _limit_to_curvature(probe, left_off, right_off)
+    keep_left = keep_right = None
+    if keep:
+        keep_left, keep_right = _union_offsets(probe, keep, fill=False)
+        keep_left = np.minimum(keep_left, left_off)
+        keep_right = np.maximum(keep_right, right_off)
     starts_s = probe.to_sl(np.array([pieces[k][0][0] for k in starts]))[:, 0]
     starts_s[0] = 0.0
     starts_s = np.maximum.accumulate(np.clip(starts_s, 0.0, probe.length))
-    return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s)
+    return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
+                    keep_left, keep_right)
 
 
 #: Narrowest drivable width [m] a route corridor keeps around its reference line, where
@@ -514,12 +528,14 @@ def _trim_overlaps(
 
 
 def _union_offsets(
-    probe: Corridor, pieces: list[tuple[FloatArray, FloatArray, FloatArray]],
+    probe: Corridor, pieces: list[tuple[FloatArray, FloatArray, FloatArray]], *,
+    fill: bool = True,
 ) -> tuple[FloatArray, FloatArray]:
     """Left and right offsets ``(n,)`` [m] of the union of the pieces' bands.
 
     Each piece covers the stations its midline projects onto; stations no piece covers
-    (a join without junction lanes) are interpolated between their neighbours.
+    (a join without junction lanes) are interpolated between their neighbours, or with
+    ``fill=False`` left unbounded (:data:`~splineplan.corridor.UNBOUNDED`).
     """
     n = len(probe.s)
     left = np.full(n, -np.inf)
@@ -541,6 +557,8 @@ def _union_offsets(
         left[inside] = np.maximum(left[inside], lft_i)
         right[inside] = np.minimum(right[inside], rgt_i)
     covered = np.isfinite(left)
+    if not fill:
+        return (np.where(covered, left, UNBOUNDED), np.where(covered, right, -UNBOUNDED))
     if not covered.any():
         raise GeometryError("route corridor: no lane projects onto the reference line")
     left = np.interp(probe.s, probe.s[covered], left[covered])
@@ -599,13 +617,39 @@ def _smooth_polyline(points: FloatArray, sigma: float) -> FloatArray:
     return out
 
 
+#: Stretch [m] before a junction over which the vehicle's centre keeps to the lanes that
+#: connect to the next route edge (at most half the edge; not on the route's first edge,
+#: where the vehicle may already stand in another lane).
+APPROACH_LENGTH = 30.0
+
+
+def _approach_band(src: list[Lane], approach: float
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Band across the lanes ``src`` over their last ``approach`` metres (at most half)."""
+    length = float(polyline_stations(dedupe_polyline(src[0].shape))[-1])
+    cut = max(1.0 - approach / max(length, 1e-9), 0.5)
+    return _band(_cut_polyline(src[0].shape, cut, 1.0), src[0].width,
+                 _cut_polyline(src[-1].shape, cut, 1.0), src[-1].width)
+
+
+def _cut_polyline(points: FloatArray, f0: float, f1: float) -> FloatArray:
+    """The part of a polyline between fractions ``f0 < f1`` of its length."""
+    pts = dedupe_polyline(points)
+    s = polyline_stations(pts)
+    a, b = f0 * s[-1], f1 * s[-1]
+    inner = pts[(s > a + 1e-9) & (s < b - 1e-9)]
+    ends = np.column_stack((np.interp([a, b], s, pts[:, 0]), np.interp([a, b], s, pts[:, 1])))
+    return np.vstack((ends[:1], inner, ends[1:]))
+
+
 #: Largest heading change [rad] through a junction that :func:`_junction_band` rounds.
 MAX_FILLET_TURN = np.deg2rad(150.0)
 
 
 def _junction_band(incoming: list[Lane], outgoing: list[Lane]
                    ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
-    """Band through a junction from the allowed lanes of one edge to those of the next.
+    """Band through a junction from lanes of one edge to lanes of the next (each list from
+    the rightmost to the leftmost lane).
 
     Each side is the curve SUMO rounds a kerb with: a cubic Bezier from the incoming
     band's side, where it ends, to the outgoing band's side, where it starts, tangent to

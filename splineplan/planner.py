@@ -151,7 +151,7 @@ def plan_corridor(
         # the first feasible attempt, else the one from the best join
         cut, rm, tr = tried[-1] if tried[-1][2].feasible else tried[0]
         if prev is not None:
-            parts.append(_head(prev, cut + 1))
+            parts.append(_head(prev, cut + 1, tp.kappa_max))
         roadmaps.append(rm)
         prev = tr
     assert prev is not None
@@ -250,12 +250,19 @@ def elongate_for_roadmap(corridor: Corridor, obstacles: Obstacles,
     return obstacles.elongated(corridor.heading_at(corridor.to_sl(centroids)[:, 0]), extra)
 
 
-def _head(tr: Trajectory, n: int) -> Trajectory:
-    """The first ``n`` samples of a trajectory."""
-    return replace(tr, t=tr.t[:n], x=tr.x[:n], y=tr.y[:n], heading=tr.heading[:n],
+def _head(tr: Trajectory, n: int, kappa_max: float) -> Trajectory:
+    """The first ``n`` samples of a trajectory; feasible if those samples keep the margin
+    and the turning limit (what fails beyond the join is not driven)."""
+    head = replace(tr, t=tr.t[:n], x=tr.x[:n], y=tr.y[:n], heading=tr.heading[:n],
                    speed=tr.speed[:n], curvature=tr.curvature[:n], s=tr.s[:n],
                    clearance_obstacles=tr.clearance_obstacles[:n],
                    clearance_road=tr.clearance_road[:n])
+    if tr.feasible:
+        return head
+    ok = (np.all(head.clearance_obstacles >= tr.safety_margin - 1e-6)
+          and np.all(head.clearance_road >= tr.safety_margin - 1e-6)
+          and np.all(np.abs(head.curvature) <= kappa_max * (1.0 + 1e-6)))
+    return replace(head, feasible=bool(ok))
 
 
 def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,

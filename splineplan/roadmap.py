@@ -226,7 +226,7 @@ def plan_roadmap(
     stations = _stations(corridor.length, params.d)
     first = min(int(np.searchsorted(stations, s0 - 1e-9, side="left")), len(stations) - 1)
     stations = stations[first:]
-    lines = _sweep_lines(corridor, stations, r)
+    lines = _sweep_lines(corridor, stations, r, keep_from=s0 + KEEP_GRACE)
     iv_line, iv_lo, iv_hi = _free_intervals(lines, obstacles, r)
     nline = len(stations)
     mid = (iv_lo + iv_hi) / 2.0
@@ -306,13 +306,27 @@ def _stations(length: float, d: float) -> FloatArray:
     return np.asarray(s, dtype=float)
 
 
-def _sweep_lines(corridor: Corridor, stations: FloatArray, r: float) -> _Lines:
+#: Stretch [m] ahead of the start over which the corridor's keep offsets do not bind: a
+#: vehicle that starts in another lane needs room to change lanes.
+KEEP_GRACE = 10.0
+
+
+def _sweep_lines(corridor: Corridor, stations: FloatArray, r: float, *,
+                 keep_from: float = 0.0) -> _Lines:
+    """Sweep lines; the vehicle's centre keeps within the shrunk road and, from station
+    ``keep_from`` on and where they leave room, within the corridor's keep offsets."""
     h = corridor.heading_at(stations)
     tangent = np.column_stack((np.cos(h), np.sin(h)))
     normal = np.column_stack((-tangent[:, 1], tangent[:, 0]))
     center = corridor.to_xy(stations, np.zeros_like(stations))
     right, left = corridor.bounds_at(stations)
-    return _Lines(stations, center, tangent, normal, right + r, left - r, r)
+    lo, hi = right + r, left - r
+    if corridor.keep_left is not None:
+        k_lo, k_hi = corridor.keep_at(stations)
+        k_lo, k_hi = np.maximum(lo, k_lo), np.minimum(hi, k_hi)
+        use = (stations >= keep_from) & (k_lo <= k_hi)
+        lo, hi = np.where(use, k_lo, lo), np.where(use, k_hi, hi)
+    return _Lines(stations, center, tangent, normal, lo, hi, r)
 
 
 def _cull(

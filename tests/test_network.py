@@ -114,10 +114,17 @@ def _check_corridor(net_path: Path, frm: str, to: str, vclass: str) -> None:
     poly = Polygon(cor.polygon()).buffer(1e-6)
     assert poly.is_valid
     assert cor.edges == route.edges
-    for eid in route.edges:
+    for i, eid in enumerate(route.edges):
         allowed = [ln for ln in net.lanes_of(eid) if ln.allows(vclass)]
+        onward = ({c.from_lane for c in net.connections_between(eid, route.edges[i + 1],
+                                                                  vclass=vclass)}
+                  if 0 < i < len(route.edges) - 1 else {ln.index for ln in allowed})
         for ln in allowed:
-            for p in _lane_points(ln.shape):
+            # lanes that do not lead on along the route: up to the approach to the junction
+            pts = _lane_points(ln.shape)
+            if ln.index not in onward:
+                pts = pts[: len(pts) // 3]
+            for p in pts:
                 assert poly.contains(Point(p)), (eid, ln.id, p)
         # edge_at of the middle of the edge's lanes is that edge
         mid = _lane_points(allowed[0].shape, 0.5)[0]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 from pathlib import Path
 
@@ -155,3 +156,35 @@ def test_junction_turns_are_feasible_and_stay_on_the_pavement(grid, start: str,
         for x, y, h in zip(tr.x[::2], tr.y[::2], tr.heading[::2], strict=True)])
     outside = swept.difference(paved_area(NETS / "grid.net.xml"))
     assert outside.area < 0.05, outside.area
+
+
+@pytest.mark.parametrize(("net_name", "start", "goal"), [
+    ("grid.net.xml", "A1B1", "B1B0"),
+    ("grid.net.xml", "A2A3", "D0D1"),
+    ("grid.net.xml", "B1C1", "C2D2"),
+    ("city.net.xml", "SWA0", "G1G2"),
+])
+def test_junctions_are_entered_from_a_lane_that_leads_on(net_name: str, start: str,
+                                                         goal: str) -> None:
+    """Where the route leaves an edge, the vehicle's centre is on a lane that has a
+    connection to the next route edge (SUMO maps the vehicle into the junction, and its
+    signals and right of way hold, only from those): checked against sumolib's lanes and
+    connections, not the package's."""
+    from shapely.geometry import LineString, Point
+
+    result = plan(load_network(NETS / net_name), start, goal)
+    snet = sumolib.net.readNet(str(NETS / net_name), withInternal=True)
+    tr = result.trajectory
+    xy = np.column_stack((tr.x, tr.y))
+    edges = result.route.edges
+    for a, b in itertools.pairwise(edges[1:]):
+        lanes = snet.getEdge(a).getLanes()
+        onward = {c.getFromLane().getIndex() for c in snet.getEdge(a).getOutgoing()[
+            snet.getEdge(b)]}
+        # the trajectory sample nearest to where the lanes end, 2 m before it
+        end = LineString(lanes[0].getShape()).interpolate(-2.0)
+        i = int(np.argmin(np.hypot(*(xy - np.array(end.coords[0])).T)))
+        at = Point(xy[i])
+        dist = {ln.getIndex(): LineString(ln.getShape()).distance(at) for ln in lanes}
+        nearest = min(dist, key=dist.__getitem__)
+        assert nearest in onward, (a, b, nearest, onward)
