@@ -18,3 +18,12 @@ def monaco_net() -> Path:
     if not MONACO.exists():
         pytest.skip(f"Monaco network not found at {MONACO} (../shared/data is absent)")
     return MONACO
+
+
+#: Routes on grid.net.xml through each kind of junction turn: right, left, right, a
+#: corner of the grid with turns, and a longer route with several turns.
+GRID_TURNS = [("A1B1", "B1B0"), ("B0C0", "C0C1"), ("C0C1", "C1D1"), ("C2C1", "C2B2"),
+              ("B1C1", "C2D2")]
+#: Routes through the grid's outer corners, where two edges meet at a sharp inner corner
+#: with no junction area to round it.
+GRID_CORNERS = [("C3D3", "B1A1"), ("A2A3", "D0D1")]

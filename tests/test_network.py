@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sumolib
-from conftest import NETS
+from conftest import GRID_CORNERS, GRID_TURNS, NETS
 from oracle import paved_area
 from shapely.geometry import Point, Polygon
 
@@ -159,14 +159,7 @@ def test_corridor_city() -> None:
     assert wp == pytest.approx(3.2, abs=1e-6) and wb == pytest.approx(6.4, abs=1e-6)
 
 
-
-@pytest.mark.parametrize(("start", "goal"), [
-    ("A1B1", "B1B0"),  # right turn
-    ("B0C0", "C0C1"),  # left turn
-    ("C0C1", "C1D1"),  # right turn
-    ("C3D3", "B1A1"),  # a corner of the grid and turns
-    ("A2A3", "D0D1"),
-])
+@pytest.mark.parametrize(("start", "goal"), GRID_TURNS + GRID_CORNERS)
 def test_corridor_through_junctions_is_paved_and_wide(start: str, goal: str) -> None:
     """Through a junction the corridor spans from the allowed lanes of one edge to those
     of the next (the kerb rounded as SUMO rounds it), not only the internal lanes' band,

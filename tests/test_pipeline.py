@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sumolib
+from conftest import GRID_TURNS
 
 from splineplan.cli import main
 from splineplan.network import load_network, read_obstacles
@@ -127,13 +128,7 @@ def test_monaco_routes_plan_forward(monaco_net) -> None:
         assert tr.s[-1] == pytest.approx(cor.length, rel=0.05)
 
 
-@pytest.mark.parametrize(("start", "goal"), [
-    ("A1B1", "B1B0"),  # right turn
-    ("B0C0", "C0C1"),  # left turn
-    ("C0C1", "C1D1"),  # right turn
-    ("C2C1", "C2B2"),  # turns at a corner of the grid
-    ("B1C1", "C2D2"),
-])
+@pytest.mark.parametrize(("start", "goal"), GRID_TURNS)
 def test_junction_turns_are_feasible_and_stay_on_the_pavement(grid, start: str,
                                                               goal: str) -> None:
     """Through SUMO's junctions the trajectory keeps the turning limit and the margin, and
