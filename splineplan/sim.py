@@ -9,7 +9,8 @@ of a headless SUMO run:
 2. replan (levels 2 and 3 on a window of the route's corridor, ``lookahead`` metres long)
    when the window runs short, when the set of obstacles ahead changes, when SUMO put the ego
    off the plan, and at level 1 with the blocked edge avoided when level 2 finds the road
-   closed;
+   closed (new obstacles ahead and traffic beside the ego coming near the plan are looked
+   for every :data:`TRIGGER_PERIOD` seconds, the rest every step);
 3. advance along the trajectory at its speed, slowed to keep a time gap to whatever is in
    the ego's path (moving vehicles are handled by speed) and to stop at red lights;
 4. move the ego with ``vehicle.moveToXY(..., keepRoute=3)``: SUMO's position is the middle
@@ -115,11 +116,15 @@ _BESIDE_AHEAD = 40.0
 _SWEEP_CLIP = 3.0
 _SWEEP_CLIP_TIME = 1.0
 #: Prediction times [s] of the check for a beside vehicle coming near the planned path.
-_CONFLICT_TIMES = np.arange(0.0, 3.01, 0.5)
+_CONFLICT_TIMES: tuple[float, ...] = tuple(0.5 * k for k in range(7))
 #: Longitudinal slack [m] of that check.
 _CONFLICT_SLACK = 1.0
 #: At most one ``traffic`` replan per this many seconds.
 _TRAFFIC_REPLAN_EVERY = 0.5
+#: Period [s] of the checks for new obstacles ahead and for traffic beside the ego coming
+#: near the plan (a reaction time well below a driver's; the deviation and horizon checks,
+#: and the ego's own safety checks, run every step).
+TRIGGER_PERIOD = 0.3
 
 #: Who drives the ego: ``planner`` (splineplan, through ``moveToXY``), ``sumo`` (SUMO's
 #: default car-following and lane-change models, lane-based: SUMO started without
@@ -376,8 +381,14 @@ class _Run:
         self._obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]] = {}
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.traffic_after = 0.0  # no traffic replan before this time [s]
+        self.trigger_after = 0.0  # no obstacle or traffic check before this time [s]
         self.others = _NO_OTHERS
         self._beside_at: tuple[float, float] | None = None
+        self._cand_at: tuple[float, float] | None = None
+        self._lane_of: tuple[str, int] = ("", 0)  # the last lane's id and index
+        self._ahead_box: tuple[list[float], ...] = ([], [], [], [])
+        self._sample_step = 0.0
+        self._cand_was: list[int] = []
         self._turn_key: tuple[Corridor, float] | None = None
         self._turn_window: FloatArray = np.zeros(0)
         self._beside_was: tuple[np.ndarray, FloatArray] = (np.zeros(0, dtype=np.int64),
@@ -878,6 +889,9 @@ class _Run:
 
     # -- planning ----------------------------------------------------------------------------
     def _maybe_replan(self) -> None:
+        """Replan when needed: retry after a failure, SUMO put the ego off the plan, the plan
+        runs short (every step), a new obstacle ahead, a vehicle beside the ego comes near
+        the plan (every :data:`TRIGGER_PERIOD`)."""
         sim = self.sc.sim
         if self.traj is None or self.retry_at is not None:
             if self.retry_at is not None and self.time >= self.retry_at:
@@ -887,21 +901,24 @@ class _Run:
             self._set_pose_from_sumo()
             self._replan("deviation", f"SUMO placed the ego {self.deviation:.2f} m off the plan")
             return
-        ahead = self._ahead()
-        new = self._ahead_ids(*ahead) - self.planned_ids
-        if new:
-            self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
-                         obstacles=self._obstacles_ahead(ahead))
-            return
-        if self.time >= self.traffic_after:
-            near = self._traffic_conflict()
-            if near is not None:
-                self.traffic_after = self.time + _TRAFFIC_REPLAN_EVERY
-                self._replan("traffic", f"vehicle '{near}' beside the ego comes near the "
-                                        "planned path", obstacles=self._obstacles_ahead(ahead))
+        ahead = None
+        if self.time >= self.trigger_after:
+            self.trigger_after = self.time + TRIGGER_PERIOD - 0.5 * self.dt
+            ahead = self._ahead()
+            new = self._ahead_ids(*ahead) - self.planned_ids
+            if new:
+                self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
+                             obstacles=self._obstacles_ahead(ahead))
                 return
+            if self.time >= self.traffic_after:
+                near = self._traffic_conflict()
+                if near is not None:
+                    self.traffic_after = self.time + _TRAFFIC_REPLAN_EVERY
+                    self._replan("traffic", f"vehicle '{near}' beside the ego comes near the "
+                                            "planned path", obstacles=self._obstacles_ahead(ahead))
+                    return
         assert self.corridor is not None
-        left = self.path_s[-1] - self.u
+        left = float(self.path_s[-1]) - self.u
         if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
                 left < sim.replan_distance):
             self._replan("horizon", f"{left:.1f} m of the plan left",
@@ -1040,7 +1057,30 @@ class _Run:
     def _beside_now(self) -> tuple[np.ndarray, FloatArray]:
         o = self.others
         assert self.corridor is not None
-        # a cheap first cut in the ego's own frame, before projecting onto the route
+        picked = self._beside_candidates()
+        if not picked:
+            return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+        cand = np.asarray(picked, dtype=np.int64)
+        c = self.corridor
+        sl = self._project(np.column_stack((o.cx[cand], o.cy[cand])),
+                           back=_BESIDE_BACK + 15.0, ahead=_BESIDE_AHEAD + 15.0)
+        s_in = np.minimum(np.maximum(sl[:, 0], 0.0), c.length)
+        right, left = c.bounds_at(s_in)
+        seg = np.minimum(np.searchsorted(c.s, s_in, side="right") - 1, len(c.s) - 2)
+        along = np.cos(o.head[cand] - self._ref_heading[seg]) > math.cos(math.pi / 4.0)
+        keep = (along & (sl[:, 0] >= self.station - _BESIDE_BACK)
+                & (sl[:, 0] <= self.station + _BESIDE_AHEAD)
+                & (sl[:, 1] >= right - 0.5) & (sl[:, 1] <= left + 0.5)
+                & (np.abs(sl[:, 1] - self.lateral) >= BESIDE_LATERAL))
+        return cand[keep], sl[keep]
+
+    def _beside_candidates(self) -> list[int]:
+        """Increasing indices into ``self.others`` of the vehicles that may be beside the ego
+        (:meth:`_beside`): a cheap first cut in the ego's own frame, a superset of those
+        beside, before projecting onto the route. Cached per time and station."""
+        if self._cand_at == (self.time, self.station):
+            return self._cand_was
+        o = self.others
         x, y, h = (float(v) for v in self.pose)
         ch, sh = math.cos(h), math.sin(h)
         window = self._route_window()
@@ -1065,21 +1105,9 @@ class _Run:
                 cos_min = math.cos(min(math.pi / 4.0 + self._route_turn(h, window), math.pi))
             if co * ch + si * sh >= cos_min - 1e-9:
                 picked.append(i)
-        if not picked:
-            return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-        cand = np.asarray(picked, dtype=np.int64)
-        c = self.corridor
-        sl = self._project(np.column_stack((o.cx[cand], o.cy[cand])),
-                           back=_BESIDE_BACK + 15.0, ahead=_BESIDE_AHEAD + 15.0)
-        s_in = np.minimum(np.maximum(sl[:, 0], 0.0), c.length)
-        right, left = c.bounds_at(s_in)
-        seg = np.minimum(np.searchsorted(c.s, s_in, side="right") - 1, len(c.s) - 2)
-        along = np.cos(o.head[cand] - self._ref_heading[seg]) > math.cos(math.pi / 4.0)
-        keep = (along & (sl[:, 0] >= self.station - _BESIDE_BACK)
-                & (sl[:, 0] <= self.station + _BESIDE_AHEAD)
-                & (sl[:, 1] >= right - 0.5) & (sl[:, 1] <= left + 0.5)
-                & (np.abs(sl[:, 1] - self.lateral) >= BESIDE_LATERAL))
-        return cand[keep], sl[keep]
+        self._cand_at = (self.time, self.station)
+        self._cand_was = picked
+        return picked
 
     def _route_window(self) -> FloatArray:
         """Headings [rad] of the route's segments from a metre before :data:`_BESIDE_BACK`
@@ -1137,30 +1165,52 @@ class _Run:
         """The first moving vehicle beside the ego that, driving on at its speed and
         heading, comes within the ego's width plus the safety margin of where the ego will
         be along its plan in the next few seconds; ``None`` if none does."""
-        if self.traj is None:
+        if self.traj is None or not self.others.n or self.corridor is None:
+            return None
+        # the test on the cheap superset of the vehicles beside first: usually none comes
+        # near, and then none of those beside does either
+        cand = self._beside_candidates()
+        if not cand:
+            return None
+        hits = self._conflicts(cand)
+        if not hits:
             return None
         idx, _ = self._beside()
-        if not len(idx):
-            return None
+        first = [i for i in idx.tolist() if i in hits]
+        return self.others.ids[first[0]] if first else None
+
+    def _conflicts(self, idx: list[int]) -> list[int]:
+        """Those of the vehicles ``idx`` (indices into ``self.others``) that, driving on at
+        their speed and heading, come near the plan (:meth:`_traffic_conflict`).
+
+        Plain floats: a few vehicles at a few prediction times."""
         ego, margin = self.sc.ego, self.sc.roadmap.safety_margin
         o = self.others
-        lens, wids, speeds = o.length, o.width, o.speed
-        tau = _CONFLICT_TIMES
-        u = np.minimum(self.u + self.v * tau, self.path_s[-1])  # (m,)
-        ex = np.interp(u, self.path_s, self.path_xy[:, 0])
-        ey = np.interp(u, self.path_s, self.path_xy[:, 1])
-        eh = np.interp(u, self.path_s, self.path_heading)
-        travel = speeds[idx, None] * tau[None]  # (k, m)
-        ox = o.cx[idx, None] + travel * o.cos[idx, None]
-        oy = o.cy[idx, None] + travel * o.sin[idx, None]
-        dx, dy = ox - ex, oy - ey
-        ce, se = np.cos(eh), np.sin(eh)
-        lon = dx * ce + dy * se
-        lat = dy * ce - dx * se
-        hit = ((np.abs(lon) < (ego.length + lens[idx, None]) / 2.0 + _CONFLICT_SLACK)
-               & (np.abs(lat) < (ego.width + wids[idx, None]) / 2.0 + margin))
-        rows = np.flatnonzero(hit.any(axis=1))
-        return o.ids[idx[rows[0]]] if len(rows) else None
+        ps, px, py, ph, _ = self._pl
+        end = ps[-1]
+        poses = []  # where the ego will be: x, y, cos, sin of the heading
+        for tau in _CONFLICT_TIMES:
+            j, f = _locate(min(self.u + self.v * tau, end), ps)
+            if len(ps) < 2:
+                x, y, h = px[0], py[0], ph[0]
+            else:
+                x = px[j] + f * (px[j + 1] - px[j])
+                y = py[j] + f * (py[j + 1] - py[j])
+                h = ph[j] + f * (ph[j + 1] - ph[j])
+            poses.append((tau, x, y, math.cos(h), math.sin(h)))
+        hits = []
+        for i in idx:
+            cx, cy, co, si = float(o.cx[i]), float(o.cy[i]), float(o.cos[i]), float(o.sin[i])
+            v = float(o.speed[i])
+            lon_max = (ego.length + float(o.length[i])) / 2.0 + _CONFLICT_SLACK
+            lat_max = (ego.width + float(o.width[i])) / 2.0 + margin
+            for tau, x, y, ce, se in poses:
+                dx = cx + v * tau * co - x
+                dy = cy + v * tau * si - y
+                if abs(dx * ce + dy * se) < lon_max and abs(dy * ce - dx * se) < lat_max:
+                    hits.append(i)
+                    break
+        return hits
 
     def _take(self, traj: Any, window_end: float, *, usable: float | None = None) -> None:
         s = np.asarray(traj.s, dtype=float)
@@ -1182,13 +1232,18 @@ class _Run:
         self.ext_xy = self.path_xy[-1] + ext[:, None] * np.array([math.cos(h_end),
                                                                   math.sin(h_end)])
         self.ext_heading = np.full(len(ext), h_end)
-        from scipy.spatial import cKDTree
-
         # the path and its straight extension, for the time-gap check
         self.full_xy = np.concatenate((self.path_xy, self.ext_xy))
         self.full_s = np.concatenate((self.path_s, self.ext_s))
         self.full_heading = np.concatenate((self.path_heading, self.ext_heading))
-        self.path_tree = cKDTree(self.full_xy)
+        # for the time-gap check: the bounding box (x min, x max, y min, y max) of the
+        # samples from each on, and the largest distance between consecutive samples
+        fx, fy = self.full_xy[:, 0], self.full_xy[:, 1]
+        self._ahead_box = tuple(acc(v[::-1])[::-1].tolist() for acc, v in (
+            (np.minimum.accumulate, fx), (np.maximum.accumulate, fx),
+            (np.minimum.accumulate, fy), (np.maximum.accumulate, fy)))
+        self._sample_step = (float(np.hypot(np.diff(fx), np.diff(fy)).max()) * (1.0 + 1e-9)
+                             if len(fx) > 1 else 0.0)
         # plain lists for the per-step interpolation along the path
         self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
                     self.path_heading.tolist(), (self.path_speed**2).tolist())
@@ -1282,17 +1337,22 @@ class _Run:
         h = ph[j] + f * (ph[j + 1] - ph[j])
         self.pose = np.array([x, y, h])
         del ego
-        self._move()
+        self._move(x, y, h)
 
-    def _move(self) -> None:
+    def _move(self, x: float | None = None, y: float | None = None, h: float | None = None
+              ) -> None:
+        """Put the ego at centre ``x``, ``y`` [m], heading ``h`` [rad] (default: its pose)."""
         s, ego = self.sumo, self.sc.ego
-        x, y, h = self.pose
+        if x is None or y is None or h is None:
+            x, y, h = (float(v) for v in self.pose)
         fx = x + ego.length / 2.0 * math.cos(h)
         fy = y + ego.length / 2.0 * math.sin(h)
-        angle = sumo_angle_from_heading_scalar(float(h))
+        angle = sumo_angle_from_heading_scalar(h)
         assert self.corridor is not None
         edge = self._edge_at(self.station)
-        lane = _lane_index(self.last_lane)
+        if self._lane_of[0] != self.last_lane:
+            self._lane_of = (self.last_lane, _lane_index(self.last_lane))
+        lane = self._lane_of[1]
         t0 = time.perf_counter()
         s.vehicle.moveToXY(self.ego, edge, lane, fx, fy, angle, KEEP_ROUTE)
         self.sumo_seconds += time.perf_counter() - t0
@@ -1304,7 +1364,9 @@ class _Run:
         footprint comes within the ego's half width plus :data:`PATH_MARGIN` of a path sample
         ahead of the ego (the trajectory and its straight extension); the gap is to the first
         such sample. Only the samples within the vehicle's bounding circle plus that reach
-        can be in reach: one k-d tree query for all vehicles finds them.
+        can be in reach: a vehicle whose circle misses the bounding box of the samples
+        ahead is skipped, and the samples in the circle are found by a walk along the path
+        that skips those the distance bound rules out (:func:`_next_in_circle`).
         """
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
         sim = sc.sim
@@ -1312,28 +1374,32 @@ class _Run:
         o = self.others
         reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
         if o.n:
-            # sorted sample indices within each bounding circle plus the reach
-            balls = self.path_tree.query_ball_point(o.centre, o.radius + reach,
-                                                    return_sorted=True)
             full_s, full_x, full_y, full_h = self._full
             i0 = bisect.bisect_left(self._pl[0], self.u)  # first sample ahead
-            cand = []
-            for j, near in enumerate(balls):
-                if near and near[-1] >= i0:
-                    k0 = bisect.bisect_left(near, i0)
-                    cand.append((near[k0], j, k0))
+            cand = []  # (first sample in the circle, vehicle, centre x, y, circle's radius)
+            if i0 < len(full_s):
+                x0, x1, y0, y1 = (b[i0] for b in self._ahead_box)
+                step = self._sample_step
+                for j, (cx, cy, r) in enumerate(zip(o.cx.tolist(), o.cy.tolist(),
+                                                    o.radius.tolist(), strict=True)):
+                    r += reach
+                    if cx + r < x0 or cx - r > x1 or cy + r < y0 or cy - r > y1:
+                        continue
+                    lo = _next_in_circle(full_x, full_y, i0, cx, cy, r, step)
+                    if lo >= 0:
+                        cand.append((lo, j, cx, cy, r))
             cand.sort()
             reach2 = reach * reach
             base = self.u + ego.length / 2.0 + sim.min_gap
-            for lo, j, k0 in cand:
+            for lo, j, cx, cy, r in cand:
                 # the gap is at least up to the first sample in reach of the bounding
                 # circle, and a leader's speed is at least 0: nothing after can go lower
                 if _safe_speed(full_s[lo] - base, 0.0, tp.b_max, sim.time_gap) >= cap:
                     break
-                pts = _probe_points(float(o.cx[j]), float(o.cy[j]), float(o.cos[j]),
-                                    float(o.sin[j]), 0.5 * float(o.length[j]),
-                                    0.5 * float(o.width[j]))
-                first = _first_in_reach(pts, balls[j], k0, full_x, full_y, reach2)
+                pts = _probe_points(cx, cy, float(o.cos[j]), float(o.sin[j]),
+                                    0.5 * float(o.length[j]), 0.5 * float(o.width[j]))
+                first = _first_in_reach(pts, lo, (cx, cy, r, self._sample_step),
+                                        full_x, full_y, reach2)
                 if first < 0:
                     continue
                 gap = full_s[first] - base
@@ -1771,19 +1837,46 @@ def _probe_points(cx: float, cy: float, c: float, s: float, hl: float, hw: float
             (cx + fx, cy + fy), (cx + lx, cy + ly), (cx - fx, cy - fy), (cx - lx, cy - ly)]
 
 
-def _first_in_reach(pts: list[tuple[float, float]], samples: list[int], k0: int,
-                    xs: list[float], ys: list[float], reach2: float) -> int:
-    """The first of the sorted sample indices ``samples[k0:]`` whose point (``xs``, ``ys``)
-    [m] is within ``sqrt(reach2)`` [m] of any of the points ``pts``; -1 if none is.
+def _next_in_circle(xs: list[float], ys: list[float], i: int, cx: float, cy: float,
+                    r: float, step: float) -> int:
+    """The first index from ``i`` on of the path samples (``xs``, ``ys``) [m] within ``r``
+    [m] of ``(cx, cy)``; -1 if none is.
 
-    Plain floats: a handful of points against a handful of samples, stopping at the first
-    hit, costs less than setting up arrays."""
-    for i in samples[k0:]:
+    Consecutive samples are at most ``step`` [m] apart, so a sample at distance ``d > r``
+    rules out the next ``(d - r) / step`` ones: the walk jumps over them (plain floats, a
+    few jumps along a path of hundreds of samples)."""
+    n = len(xs)
+    r2 = r * r
+    while i < n:
+        dx, dy = xs[i] - cx, ys[i] - cy
+        d2 = dx * dx + dy * dy
+        if d2 <= r2:
+            return i
+        if step <= 0.0:  # all samples at one point
+            return -1
+        i += max(int((math.sqrt(d2) - r) / step), 1)
+    return -1
+
+
+def _first_in_reach(pts: list[tuple[float, float]], lo: int,
+                    circle: tuple[float, float, float, float],
+                    xs: list[float], ys: list[float], reach2: float) -> int:
+    """The first path sample index from ``lo`` on whose point (``xs``, ``ys``) [m] is within
+    ``sqrt(reach2)`` [m] of any of the points ``pts``; -1 if none is.
+
+    ``circle``: centre x, y [m] and radius [m] of a circle that holds every point within
+    reach of ``pts``, and the largest distance [m] between consecutive samples; only the
+    samples in it are tried (:func:`_next_in_circle`). Plain floats: a handful of points
+    against a handful of samples, stopping at the first hit, costs less than arrays."""
+    cx, cy, r, step = circle
+    i = _next_in_circle(xs, ys, lo, cx, cy, r, step)
+    while i >= 0:
         qx, qy = xs[i], ys[i]
         for px, py in pts:
             ex, ey = px - qx, py - qy
             if ex * ex + ey * ey <= reach2:
-                return int(i)
+                return i
+        i = _next_in_circle(xs, ys, i + 1, cx, cy, r, step)
     return -1
 
 

@@ -423,24 +423,32 @@ def test_path_samples_in_reach_are_in_the_bounding_circle(cx: float, cy: float, 
                                                           length: float, width: float,
                                                           reach: float, seed: int) -> None:
     """The time-gap check looks only at the path samples within a vehicle's bounding circle
-    plus the reach (one k-d tree query); any sample within reach of its probe points is
-    among them, and the first one found with plain floats is numpy's first."""
+    plus the reach (a walk that jumps over samples the distance bound rules out); any
+    sample within reach of its probe points is among them, the walk finds the circle's
+    first sample (as a k-d tree query), and the first one in reach found with plain floats
+    is numpy's first."""
     from scipy.spatial import cKDTree
 
-    from splineplan.sim import _first_in_reach, _probe_points
+    from splineplan.sim import _first_in_reach, _next_in_circle, _probe_points
 
     rng = np.random.default_rng(seed)
-    samples = np.column_stack((cx + rng.uniform(-10, 10, 200), cy + rng.uniform(-10, 10, 200)))
+    # a random walk near the vehicle: consecutive samples at most 0.5 m apart
+    steps = rng.uniform(-0.35, 0.35, (400, 2))
+    samples = np.array([cx, cy]) + rng.uniform(-12, 12, 2) + np.cumsum(steps, axis=0)
+    xs, ys = samples[:, 0].tolist(), samples[:, 1].tolist()
+    step = float(np.hypot(*np.diff(samples, axis=0).T).max()) * (1.0 + 1e-9)
     pts = _probe_points(cx, cy, math.cos(h), math.sin(h), length / 2.0, width / 2.0)
     d2 = ((np.asarray(pts)[:, None, :] - samples[None]) ** 2).sum(axis=2)  # (9, m)
     want = np.flatnonzero((d2 <= reach * reach).any(axis=0))
-    ball = cKDTree(samples).query_ball_point([[cx, cy]], [0.5 * math.hypot(length, width)
-                                                          + reach], return_sorted=True)[0]
+    r = 0.5 * math.hypot(length, width) + reach
+    ball = cKDTree(samples).query_ball_point([[cx, cy]], [r], return_sorted=True)[0]
     assert set(want.tolist()) <= set(ball)
-    k0 = int(rng.integers(0, len(ball) + 1))
-    later = want[want >= (ball[k0] if k0 < len(ball) else len(samples))]
-    got = _first_in_reach(pts, ball, k0, samples[:, 0].tolist(), samples[:, 1].tolist(),
-                          reach * reach)
+    start = int(rng.integers(0, len(samples) + 1))
+    later_ball = [i for i in ball if i >= start]
+    lo = _next_in_circle(xs, ys, start, cx, cy, r, step)
+    assert lo == (later_ball[0] if later_ball else -1)
+    later = want[want >= start]
+    got = _first_in_reach(pts, start, (cx, cy, r, step), xs, ys, reach * reach)
     assert got == (int(later[0]) if len(later) else -1)
 
 
