@@ -219,14 +219,26 @@ def plan_roadmap(
     start = np.asarray(start_xy, dtype=float).reshape(-1)
     if start.shape != (2,) or not np.all(np.isfinite(start)):
         raise GeometryError(f"start_xy must be two finite coordinates, got {start_xy!r}")
-    r = params.inflation
     s0, l0 = (float(v) for v in corridor.to_sl(start[None])[0])
     _check_start(corridor, s0, l0)
+    try:
+        return _plan(corridor, obstacles, start, s0, l0, params, s0 + KEEP_GRACE)
+    except RoadBlockedError:
+        if corridor.keep_left is None:
+            raise
+        # the lanes that lead on are blocked before the junction: the whole road will do
+        logger.debug("roadmap: no passage within the lanes that lead on; using any lane")
+        return _plan(corridor, obstacles, start, s0, l0, params, math.inf)
 
+
+def _plan(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float, l0: float,
+          params: RoadmapParams, keep_from: float) -> Roadmap:
+    """:func:`plan_roadmap` with the corridor's keep offsets bound from ``keep_from`` [m]."""
+    r = params.inflation
     stations = _stations(corridor.length, params.d)
     first = min(int(np.searchsorted(stations, s0 - 1e-9, side="left")), len(stations) - 1)
     stations = stations[first:]
-    lines = _sweep_lines(corridor, stations, r, keep_from=s0 + KEEP_GRACE)
+    lines = _sweep_lines(corridor, stations, r, keep_from=keep_from)
     iv_line, iv_lo, iv_hi = _free_intervals(lines, obstacles, r)
     nline = len(stations)
     mid = (iv_lo + iv_hi) / 2.0

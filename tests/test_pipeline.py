@@ -183,3 +183,18 @@ def test_junctions_are_entered_from_a_lane_that_leads_on(net_name: str, start: s
         dist = {ln.getIndex(): LineString(ln.getShape()).distance(at) for ln in lanes}
         nearest = min(dist, key=dist.__getitem__)
         assert nearest in onward, (a, b, nearest, onward)
+
+
+def test_car_parked_in_the_turning_lane_is_passed_without_rerouting(grid) -> None:
+    """A car stopped in the only lane that turns right, 8 m before the junction: the
+    vehicle passes it in the other lane and turns from there rather than re-routing."""
+    from splineplan.obstacles import Obstacles
+
+    assert {c.from_lane for c in grid.connections_between("B1C1", "C1C0")} == {0}
+    shape = grid.lanes_of("B1C1")[0].shape
+    d = (shape[-1] - shape[0]) / np.hypot(*(shape[-1] - shape[0]))
+    car = Obstacles.from_boxes((shape[-1] - 8.0 * d)[None], [float(np.arctan2(d[1], d[0]))],
+                               [4.5], [1.8], reference="front")
+    result = plan(grid, "A1B1", "C1C0", car)
+    assert result.route.edges == ("A1B1", "B1C1", "C1C0") and result.blocked == ()
+    assert float(np.min(car.distance(result.trajectory.xy))) > 1.0
