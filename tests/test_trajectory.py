@@ -339,7 +339,7 @@ def test_footprint_obstacle_distance_matches_shapely(poses: list[tuple[float, fl
     """The footprint-to-obstacle distance equals shapely's (0 on overlap) for a box, a
     non-convex polygon and a polygon large enough to hold the footprint, at poses apart
     from, touching, crossing and inside them."""
-    from splineplan.trajectory import _Checker
+    from splineplan.footprint import _Checker
 
     polys = [np.array([[1.0, 1.0], [3.0, 1.5], [2.5, 3.0], [0.5, 2.5]]),
              np.array([[-4, -4], [0, -4], [0, -3], [-3, -3], [-3, 0], [-4, 0]], float),
@@ -386,7 +386,7 @@ def test_band_simplification_keeps_every_segment_in_the_bands(rho: float) -> Non
     """Independent check with shapely: each kept segment meets every skipped sweep line's
     band (a LineString across the road), and the kept vertices are far fewer than all."""
     from benchmarks.fields import obstacle_field
-    from splineplan.trajectory import band_simplify
+    from splineplan.control_polygon import band_simplify
 
     corridor, obstacles, start = obstacle_field(300, 20, 9.6, 1)
     rp = RoadmapParams()
@@ -426,7 +426,7 @@ def test_detour_where_level_2_zigzags_across_lanes() -> None:
     """Seed 6: level 2's widest path crosses two lanes within a 6 m gap between rows, which
     no curve within the turning limit follows; the detour through the same graph does."""
     from benchmarks.fields import obstacle_field
-    from splineplan.trajectory import detour_roadmap
+    from splineplan.control_polygon import detour_roadmap
 
     corridor, obstacles, start = obstacle_field(300, 40, 9.6, 6)
     rm, tr = real_plan(corridor, obstacles, start)
@@ -511,7 +511,7 @@ def test_min_bending_offsets_solves_its_least_squares_problem(seed: int, m: int,
     import scipy.sparse as sp
     from scipy.optimize import lsq_linear
 
-    from splineplan.trajectory import min_bending_offsets
+    from splineplan.control_polygon import min_bending_offsets
 
     rng = np.random.default_rng(seed)
     heading = np.cumsum(rng.normal(0.0, 0.3, m))

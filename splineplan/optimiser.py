@@ -1,0 +1,352 @@
+"""Level 3's curve and its optimisation (steps 3 to 6 of :mod:`splineplan.trajectory`).
+
+A clamped B-spline evaluated on fixed parameter samples with a cached basis
+(:class:`_Curve`), the local repair of the first curve (:func:`_refine`) and equation (3),
+which moves control points to their neighbours' mean while the footprint stays clear
+(:class:`_Optimiser`): a move changes the samples linearly, so only the changed stretch is
+re-evaluated and re-checked. Separate from the control polygon (where the points come
+from) and from the sampling of the final curve (:mod:`splineplan.trajectory`).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from splineplan.curvature import curvature_from_derivatives
+from splineplan.footprint import _Checker
+from splineplan.geometry import FloatArray
+from splineplan.trajectory_params import TrajectoryParams
+
+log = logging.getLogger(__name__)
+
+
+# ---- spline set-up ---------------------------------------------------------------------
+def _knots(n: int, k: int) -> FloatArray:
+    inner = np.linspace(0.0, 1.0, n - k + 1)
+    return np.concatenate((np.zeros(k), inner, np.ones(k)))
+
+
+def _basis(u: FloatArray, t: FloatArray, k: int, n: int) -> tuple[NDArray[np.int64], FloatArray]:
+    """First control index ``(m,)`` and basis values ``(3, k + 1, m)`` for nu = 0, 1, 2.
+
+    ``basis[nu, :, j]`` holds the values at ``u[j]`` of the basis functions of control
+    points ``first[j] .. first[j] + k`` (the only ones that are not zero there) and their
+    first and second derivatives with respect to the parameter (Cox-de Boor recursion,
+    vectorised over the samples, which run along the last axis; at ``u = 1`` the left
+    limits).
+    """
+    span = np.clip(np.searchsorted(t, u, side="right") - 1, k, n - 1)
+    first = span - k
+    m = len(u)
+    # the knots around each sample: row r holds t[span + r - k], r = 0 .. 2k + 1
+    tt = t[span + np.arange(-k, k + 2)[:, None]]
+    tables = [np.ones((1, m))]
+    for p in range(1, k + 1):
+        # functions span - p .. span: t[i], t[i + 1], t[i + p], t[i + p + 1] as rows of tt
+        ti, ti1 = tt[k - p:k + 1], tt[k - p + 1:k + 2]
+        tip, tip1 = tt[k:k + p + 1], tt[k + 1:k + p + 2]
+        ext = _pad(tables[-1])
+        left = _ratio(u - ti, tip - ti)
+        right = _ratio(tip1 - u, tip1 - ti1)
+        tables.append(left * ext[:-1] + right * ext[1:])
+    vals = np.zeros((3, k + 1, m))
+    vals[0] = tables[k]
+    vals[1] = _derive(tables[k - 1], tt, k, k)
+    if k >= 2:
+        vals[2] = _derive(_derive(tables[k - 2], tt, k, k - 1), tt, k, k)
+    return first.astype(np.int64), vals
+
+
+def _pad(b: FloatArray) -> FloatArray:
+    """A zero row on each side of ``(p, m)``."""
+    out = np.zeros((b.shape[0] + 2, b.shape[1]))
+    out[1:-1] = b
+    return out
+
+
+def _ratio(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a / b`` where ``b > 0``, else 0."""
+    return np.divide(a, b, out=np.zeros(np.broadcast(a, b).shape), where=b > 0)
+
+
+def _derive(b: FloatArray, tt: FloatArray, k: int, p: int) -> FloatArray:
+    """Parameter derivatives ``(p + 1, m)`` of the degree-``p`` basis functions
+    ``span - p .. span`` from the degree ``p - 1`` ones ``b`` ``(p, m)``:
+    ``N'_{i,p} = p (N_{i,p-1} / (t_{i+p} - t_i) - N_{i+1,p-1} / (t_{i+p+1} - t_{i+1}))``
+    (``tt``: the knots around the samples, as in :func:`_basis`)."""
+    ext = _pad(b)
+    return p * (_ratio(ext[:-1], tt[k:k + p + 1] - tt[k - p:k + 1])
+                - _ratio(ext[1:], tt[k + 1:k + p + 2] - tt[k - p + 1:k + 2]))
+
+
+def _greville(t: FloatArray, k: int, n: int) -> FloatArray:
+    if k == 0:
+        return np.asarray(t[:n], dtype=float)
+    cs = np.concatenate(([0.0], np.cumsum(t)))
+    i = np.arange(n)
+    return np.asarray((cs[i + k + 1] - cs[i + 1]) / k)
+
+
+# ---- curve, repair and equation (3) ----------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class _Curve:
+    """A clamped B-spline on fixed parameter samples, with its basis there.
+
+    ``first[j]`` is the first of the ``k + 1`` control points that shape sample ``j``;
+    ``basis[nu, :, j]`` their values (nu = 0) and parameter derivatives (nu = 1, 2) there.
+    ``pool_index`` maps each control point to its index among the candidates.
+    """
+
+    ctrl: FloatArray
+    pool_index: NDArray[np.int64]
+    knots: FloatArray
+    k: int
+    u: FloatArray
+    first: NDArray[np.int64]
+    basis: FloatArray
+
+    @classmethod
+    def build(cls, ctrl: FloatArray, pool_index: NDArray[np.int64], degree: int,
+              spacing: float) -> _Curve:
+        n = len(ctrl)
+        k = min(degree, n - 1)
+        knots = _knots(n, k)
+        # samples per knot span from the longest nearby leg: moves to neighbours' means never
+        # lengthen a leg beyond the longest of its neighbours
+        legs = np.hypot(*np.diff(ctrl, axis=0).T)
+        padded = np.concatenate(([legs[0]], legs, [legs[-1]]))
+        span_len = padded[:n - k].copy()  # the longest of the k + 2 legs around each span
+        for j in range(1, k + 2):
+            np.maximum(span_len, padded[j:j + n - k], out=span_len)
+        per = np.clip(np.ceil(span_len / spacing).astype(int) + 1, 2, 400)
+        inner = knots[k:n + 1]
+        # per span, evenly spaced from its start (as np.linspace without the end point)
+        step = np.repeat(np.diff(inner) / per, per)
+        within = np.arange(int(per.sum())) - np.repeat(np.cumsum(per) - per, per)
+        u = np.concatenate((within * step + np.repeat(inner[:-1], per), [1.0]))
+        first, basis = _basis(u, knots, k, n)
+        return cls(ctrl, pool_index, knots, k, u, first, basis)
+
+    def evaluate(self, ctrl: FloatArray | None = None) -> tuple[FloatArray, FloatArray,
+                                                                  FloatArray]:
+        """Positions, first and second parameter derivatives ``(m, 2)`` at the samples."""
+        c = self.ctrl if ctrl is None else ctrl
+        cols = self.first + np.arange(self.k + 1)[:, None]
+        gx, gy = c[:, 0][cols], c[:, 1][cols]  # (k + 1, m)
+        out = []
+        for b in self.basis:
+            x, y = b[0] * gx[0], b[0] * gy[0]
+            for j in range(1, self.k + 1):
+                x += b[j] * gx[j]
+                y += b[j] * gy[j]
+            out.append(np.column_stack((x, y)))
+        return out[0], out[1], out[2]
+
+
+def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
+            params: TrajectoryParams) -> tuple[_Curve, int, int, tuple[FloatArray, ...]]:
+    """The first curve, repaired locally where its footprint is not clear.
+
+    For each sample where the footprint touches an obstacle (with the margin) or leaves the
+    road, the left-out candidate nearest to it, among those between the control points that
+    shape it, comes back; where none is left there, the shaping control point nearest to
+    the sample is doubled (up to ``degree`` copies: repeated control points pull the curve
+    onto its control polygon, undoing the corner cut). At most ``repair_rounds`` rounds,
+    and none after two rounds that did not improve on the best curve; the least violating
+    curve is returned (footprint first, then curvature: the curvature is left to the
+    optimisation).
+
+    Returns the curve, the rounds, the number of control points doubled and the curve's
+    samples (positions, derivatives, footprint slack, stations) for the optimiser.
+    """
+    counts = counts.copy()
+    rounds = doubled = stall = 0
+    n_pool = len(pool)
+    best: tuple[tuple[float, float], _Curve, int, int, tuple[FloatArray, ...]] | None = None
+    while True:
+        pool_idx = np.repeat(np.arange(n_pool), counts)
+        curve = _Curve.build(pool[pool_idx], pool_idx, params.degree, params.sample_spacing)
+        pos, d1, d2 = curve.evaluate()
+        slack, sc = checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]))
+        kmax = float(np.abs(curvature_from_derivatives(d1, d2)).max())
+        # violation: footprint [m] inside the margin, then curvature beyond the limit
+        score = (max(-float(slack.min()), 0.0), max(kmax - params.kappa_max, 0.0))
+        if best is None or score < best[0]:
+            best = (score, curve, rounds, doubled, (pos, d1, d2, slack, sc))
+            stall = 0
+        else:
+            stall += 1
+        bad = np.flatnonzero(slack < 0)
+        if len(bad) == 0 or rounds >= params.repair_rounds or stall >= 2:
+            break
+        k = curve.k
+        n = len(pool_idx)
+        add = np.zeros(n_pool, dtype=bool)
+        dup = np.zeros(n_pool, dtype=bool)
+        for j in bad.tolist():
+            f = int(curve.first[j])
+            shaping = np.arange(f, min(f + k, n - 1) + 1)
+            a, b = int(pool_idx[shaping[0]]), int(pool_idx[shaping[-1]])
+            free = np.flatnonzero(counts[a + 1:b] == 0) + a + 1
+            if len(free):
+                add[free[np.argmin(np.hypot(*(pool[free] - pos[j]).T))]] = True
+        if not add.any():
+            # no vertex left to re-insert: double the control point nearest each violation
+            for j in bad.tolist():
+                f = int(curve.first[j])
+                inner = pool_idx[f:min(f + k, n - 1) + 1]
+                inner = inner[(inner >= 2) & (inner < n_pool - 1) & (counts[inner] < k)]
+                if len(inner):
+                    dup[inner[np.argmin(np.hypot(*(pool[inner] - pos[j]).T))]] = True
+        if not (add.any() or dup.any()):
+            break
+        counts[add] = 1
+        counts[dup] += 1
+        doubled += int(dup.sum())
+        rounds += 1
+    # the least violating curve seen (the first clear one, if any)
+    assert best is not None
+    return best[1], best[2], best[3], best[4]
+
+
+class _Optimiser:
+    """Equation (3) on fixed parameter samples, with local re-evaluation."""
+
+    def __init__(self, curve: _Curve, checker: _Checker, params: TrajectoryParams,
+                 samples: tuple[FloatArray, ...]) -> None:
+        self.ctrl = curve.ctrl.copy()
+        first, k, u, knots = curve.first, curve.k, curve.u, curve.knots
+        self.first, self.basis, self.k = first, curve.basis, k
+        self.checker, self.params = checker, params
+        n = len(self.ctrl)
+        self.n = n
+        cols = first[:, None] + np.arange(k + 1)[None, :]
+        self.pos, self.d1, self.d2, self.slack, self.station = (a.copy() for a in samples)
+        self.kappa = np.abs(curvature_from_derivatives(self.d1, self.d2))
+        # samples a move of control point i changes: [lo[i], hi[i])
+        idx = np.arange(n)
+        self.lo = np.searchsorted(first, idx - k, side="left")
+        self.hi = np.searchsorted(first, idx, side="right")
+        # for each sample, the shaping control points ordered by Greville distance
+        grev = _greville(knots, k, n)
+        order = np.argsort(np.abs(grev[cols] - u[:, None]), axis=1, kind="stable")
+        self.cand = np.take_along_axis(cols, order, axis=1)
+        self.movable = np.ones(n, dtype=bool)
+        self.movable[:2] = False  # the start and its heading point
+        self.movable[-1] = False
+        self.refused = np.zeros(n, dtype=bool)
+
+    def _state(self) -> tuple[FloatArray, ...]:
+        return tuple(a.copy() for a in (self.ctrl, self.pos, self.d1, self.d2, self.kappa,
+                                        self.slack, self.station))
+
+    def _restore(self, state: tuple[FloatArray, ...]) -> None:
+        self.ctrl, self.pos, self.d1, self.d2, self.kappa, self.slack, self.station = state
+
+    def run(self) -> tuple[int, int, int, int]:
+        """Rounds of moves until no point is slow, none may move, ``max_iterations`` moves
+        were tried or ``patience`` rounds did not help; keeps the best curve seen.
+
+        Returns the moves tried, accepted and refused, and the rounds.
+        """
+        p = self.params
+        k, n = self.k, self.n
+        tried = accepted = refused = rounds = 0
+        best = (float(self.kappa.max()), self._state())
+        idle = 0
+        while tried < p.max_iterations and idle < p.patience:
+            slow = self.kappa > p.kappa_smax * (1.0 + 1e-9)
+            if not slow.any():
+                break
+            c = self.ctrl
+            at_mean = np.zeros(n, dtype=bool)
+            at_mean[1:-1] = np.hypot(*(c[1:-1] - 0.5 * (c[:-2] + c[2:])).T) < 1e-9
+            eligible = self.movable & ~self.refused & ~at_mean
+            js = np.nonzero(slow)[0]
+            ok = eligible[self.cand[js]]
+            has = ok.any(axis=1)
+            if not has.any():
+                break
+            js = js[has]
+            cp = self.cand[js, np.argmax(ok[has], axis=1)]
+            bad = np.zeros(n)
+            np.maximum.at(bad, cp, self.kappa[js])
+            chosen = _independent(bad, k, p.max_iterations - tried)
+            rounds += 1
+            tried += len(chosen)
+            acc = self._try(np.asarray(chosen, dtype=np.int64))
+            accepted += int(acc.sum())
+            refused += int((~acc).sum())
+            worst = float(self.kappa.max())
+            if worst < best[0] - 1e-12 and acc.any():
+                best = (worst, self._state())
+                idle = 0
+            else:
+                idle += 1
+        if float(self.kappa.max()) > best[0] + 1e-12:
+            self._restore(best[1])
+        log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)
+        return tried, accepted, refused, rounds
+
+    def _try(self, moves: NDArray[np.int64]) -> NDArray[np.bool_]:
+        """Try moving each control point in ``moves`` to its neighbours' mean."""
+        k, p = self.k, self.params
+        delta = 0.5 * (self.ctrl[moves - 1] + self.ctrl[moves + 1]) - self.ctrl[moves]
+        lo, hi = self.lo[moves], self.hi[moves]
+        lens = hi - lo
+        nm = len(moves)
+        if nm == 1:
+            idx = np.arange(lo[0], hi[0])
+            owner = np.zeros(len(idx), dtype=np.int64)
+        else:
+            owner = np.repeat(np.arange(nm), lens)
+            idx = np.arange(int(lens.sum())) + np.repeat(lo - np.cumsum(lens) + lens, lens)
+        r = moves[owner] - self.first[idx]  # column of the moved point in each sample's row
+        dlt = delta[owner]
+        b = self.basis[:, r, idx]  # (3, q)
+        pos = self.pos[idx] + b[0, :, None] * dlt
+        d1 = self.d1[idx] + b[1, :, None] * dlt
+        d2 = self.d2[idx] + b[2, :, None] * dlt
+        kap = np.abs(curvature_from_derivatives(d1, d2))
+        slack, sc = self.checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]), self.station[idx])
+        old_k, old_s = self.kappa[idx], self.slack[idx]
+        # per sample: samples clear of obstacles and road edges stay clear
+        bad = (old_s >= 0) & (slack < 0)
+        # per move: the worst violation of the changed stretch (curvature beyond the turning
+        # limit, footprint within the margin) does not grow
+        starts = np.cumsum(lens) - lens  # each move's samples: one run, never empty
+        worse = np.logical_or.reduceat(bad, starts)
+        limits = ((kap, old_k, p.kappa_max), (-slack, -old_s, 0.0))
+        for new, old, lim in limits:
+            worse |= (np.maximum.reduceat(new, starts)
+                      > np.maximum(np.maximum.reduceat(old, starts), lim) + 1e-12)
+        acc = ~worse
+        keep = acc[owner]
+        ki = idx[keep]
+        self.pos[ki], self.d1[ki], self.d2[ki] = pos[keep], d1[keep], d2[keep]
+        self.kappa[ki], self.slack[ki], self.station[ki] = kap[keep], slack[keep], sc[keep]
+        self.ctrl[moves[acc]] += delta[acc]
+        self.refused[moves[~acc]] = True
+        for i in moves[acc]:
+            self.refused[max(i - k, 0):i + k + 1] = False
+        return acc
+
+
+def _independent(bad: FloatArray, k: int, budget: int) -> list[int]:
+    """Control points to move this round: the worst first, then others ``k + 1`` apart."""
+    order = np.argsort(-bad, kind="stable")
+    order = order[bad[order] > 0]
+    taken = [False] * (len(bad) + 2 * k + 2)  # a list: a few short slices, no array calls
+    chosen: list[int] = []
+    for i in order.tolist():
+        if len(chosen) >= budget:
+            break
+        if any(taken[i: i + 2 * k + 1]):
+            continue
+        taken[i + k] = True  # offset by k so that i - k >= 0
+        chosen.append(i)
+    return chosen
