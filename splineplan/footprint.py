@@ -264,7 +264,8 @@ def _overlap(u: FloatArray, v: FloatArray, ub: FloatArray, vb: FloatArray, hl: f
     for a, d, h in ((u, du, hl), (v, dv, hw)):
         flat = np.abs(d) < 1e-15
         ok &= ~flat | (np.abs(a) <= h)
-        with np.errstate(divide="ignore", invalid="ignore"):
+        # (flat edges' quotients, inf or nan or overflowing, are replaced just below)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             t1 = (-h - a) / d
             t2 = (h - a) / d
         lo = np.where(flat, -np.inf, np.minimum(t1, t2))
@@ -274,7 +275,7 @@ def _overlap(u: FloatArray, v: FloatArray, ub: FloatArray, vb: FloatArray, hl: f
     crosses = (ok & (t_in <= t_out)).any(axis=0)
     # rectangle inside the polygon: its centre (the origin) by crossing number
     straddle = (v > 0) != (vb > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         ucross = u - v * du / dv
     inside = (straddle & (ucross > 0)).sum(axis=0) % 2 == 1
     return np.asarray(crosses | inside)

@@ -103,7 +103,7 @@ def points_in_polygons(
     ay, by = a[None, :, 1], b[None, :, 1]
     ax, bx = a[None, :, 0], b[None, :, 0]
     straddle = (ay > py) != (by > py)
-    with np.errstate(divide="ignore", invalid="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         xcross = ax + (py - ay) * (bx - ax) / (by - ay)
     hit = straddle & (px < xcross)
     k = len(offsets) - 1
