@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
+
+# The fast suite draws the same examples on every run, so that the same code gets the same
+# verdict; HYPOTHESIS_PROFILE=explore draws new ones (``tox -e explore``, and the slow runs).
+settings.register_profile("repeatable", derandomize=True)
+settings.register_profile("explore", derandomize=False)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
 
 ROOT = Path(__file__).resolve().parent.parent
 NETS = ROOT / "sumo_nets"
