@@ -80,6 +80,17 @@ from splineplan.metrics import (
 )
 from splineplan.obstacles import Obstacles
 from splineplan.scenario import Scenario
+from splineplan.traffic import (
+    NO_OTHERS,
+    OFF_ROAD_TOLERANCE,
+    Others,
+    RoadCheck,
+    first_in_reach,
+    footprint_corners,
+    next_in_circle,
+    probe_points,
+    safe_speed,
+)
 
 log = logging.getLogger(__name__)
 
@@ -87,12 +98,6 @@ log = logging.getLogger(__name__)
 KEEP_ROUTE = 3
 #: Lateral slack [m] beyond the ego's half width within which a vehicle counts as in its path.
 PATH_MARGIN = 0.15
-#: How far [m] a footprint point may stick out of the lane bands and junction areas before it
-#: counts as off the road (lane bands are a model of the drawn road: curbs at junction corners
-#: are cut by a few centimetres).
-OFF_ROAD_TOLERANCE = 0.1
-#: Radius [m] of the neighbourhood whose lane segments the road check keeps at hand.
-_ROAD_CACHE = 20.0
 #: Spacing [m] of the path samples used to find vehicles in the ego's path.
 _PATH_SPACING = 0.5
 #: Seconds between retries when no plan could be made.
@@ -382,7 +387,7 @@ class _Run:
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.traffic_after = 0.0  # no traffic replan before this time [s]
         self.trigger_after = 0.0  # no obstacle or traffic check before this time [s]
-        self.others = _NO_OTHERS
+        self.others = NO_OTHERS
         self._beside_at: tuple[float, float] | None = None
         self._cand_at: tuple[float, float] | None = None
         self._lane_of: tuple[str, int] = ("", 0)  # the last lane's id and index
@@ -424,7 +429,7 @@ class _Run:
             raise ScenarioError(f"{sc.name}: ego.goal_pos {ego.goal_pos} m is beyond the end of "
                                 f"goal edge '{ego.goal_edge}' ({goal_len:.1f} m)")
         self._set_route(route_corridor(self.net, route, vclass=ego.vclass), route.edges)
-        self.road = _RoadCheck(self.net, ego.vclass)
+        self.road = RoadCheck(self.net, ego.vclass)
         self.route_length = route.length
         for p in (*sc.routes, *sc.additional):
             _check_xml(Path(p))
@@ -656,20 +661,20 @@ class _Run:
     # -- observation --------------------------------------------------------------------------
     def _read_others(self) -> None:
         """The vehicles around the ego, from the context subscription (one call), as
-        arrays (:class:`_Others`)."""
+        arrays (:class:`~splineplan.traffic.Others`)."""
         c = self.c
         t0 = time.perf_counter()
         res = self.sumo.vehicle.getContextSubscriptionResults(self.ego)
         self.sumo_seconds += time.perf_counter() - t0
         ids = [vid for vid in res or () if vid != self.ego]
         if not ids:
-            self.others = _NO_OTHERS
+            self.others = NO_OTHERS
             return
         pos, ang, spd = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED
         lng, wid, stop = c.VAR_LENGTH, c.VAR_WIDTH, c.VAR_STOPSTATE
         a = np.array([(*v[pos], v[ang], v[lng], v[wid], v[spd], v[stop])
                       for v in map(res.__getitem__, ids)], dtype=float)
-        self.others = _Others(ids, a, self.sc.sim.stopped_speed)
+        self.others = Others(ids, a, self.sc.sim.stopped_speed)
 
     def _observe(self) -> None:
         """Read the world after a step; check where SUMO put the ego; safety checks."""
@@ -724,7 +729,7 @@ class _Run:
         within 2 m.
         """
         ego, o = self.sc.ego, self.others
-        corners = _box_corners(x, y, h, ego.length, ego.width)
+        corners = footprint_corners(x, y, h, ego.length, ego.width)
         clear_obs = clear_veh = math.inf
         r_ego = 0.5 * math.hypot(ego.length, ego.width)
         if o.n:
@@ -820,7 +825,7 @@ class _Run:
     limited = 0
     deviation = 0.0
     station = 0.0
-    others: _Others
+    others: Others
 
     # -- obstacles ahead ----------------------------------------------------------------------
     def _ahead(self) -> tuple[np.ndarray, np.ndarray]:
@@ -1366,7 +1371,7 @@ class _Run:
         such sample. Only the samples within the vehicle's bounding circle plus that reach
         can be in reach: a vehicle whose circle misses the bounding box of the samples
         ahead is skipped, and the samples in the circle are found by a walk along the path
-        that skips those the distance bound rules out (:func:`_next_in_circle`).
+        that skips those the distance bound rules out (:func:`~splineplan.traffic.next_in_circle`).
         """
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
         sim = sc.sim
@@ -1385,7 +1390,7 @@ class _Run:
                     r += reach
                     if cx + r < x0 or cx - r > x1 or cy + r < y0 or cy - r > y1:
                         continue
-                    lo = _next_in_circle(full_x, full_y, i0, cx, cy, r, step)
+                    lo = next_in_circle(full_x, full_y, i0, cx, cy, r, step)
                     if lo >= 0:
                         cand.append((lo, j, cx, cy, r))
             cand.sort()
@@ -1394,18 +1399,18 @@ class _Run:
             for lo, j, cx, cy, r in cand:
                 # the gap is at least up to the first sample in reach of the bounding
                 # circle, and a leader's speed is at least 0: nothing after can go lower
-                if _safe_speed(full_s[lo] - base, 0.0, tp.b_max, sim.time_gap) >= cap:
+                if safe_speed(full_s[lo] - base, 0.0, tp.b_max, sim.time_gap) >= cap:
                     break
-                pts = _probe_points(cx, cy, float(o.cos[j]), float(o.sin[j]),
+                pts = probe_points(cx, cy, float(o.cos[j]), float(o.sin[j]),
                                     0.5 * float(o.length[j]), 0.5 * float(o.width[j]))
-                first = _first_in_reach(pts, lo, (cx, cy, r, self._sample_step),
+                first = first_in_reach(pts, lo, (cx, cy, r, self._sample_step),
                                         full_x, full_y, reach2)
                 if first < 0:
                     continue
                 gap = full_s[first] - base
                 rel = math.cos(float(o.head[j]) - full_h[first])
                 v_l = max(float(o.speed[j]) * rel, 0.0)
-                cap = min(cap, _safe_speed(gap, v_l, tp.b_max, sim.time_gap))
+                cap = min(cap, safe_speed(gap, v_l, tp.b_max, sim.time_gap))
         cap = min(cap, self._red_light_speed())
         return cap, int(math.isfinite(cap))
 
@@ -1537,251 +1542,6 @@ class _Run:
 
 # ---- helpers ------------------------------------------------------------------------------
 
-class _RoadCheck:
-    """Whether points lie on a lane (normal or junction) that a vehicle class may use."""
-
-    def __init__(self, net: Any, vclass: str, tol: float = OFF_ROAD_TOLERANCE) -> None:
-        from scipy.spatial import cKDTree
-
-        lanes = [ln for edge in net.lanes for ln in edge if ln.allows(vclass)]
-        lanes += [ln for ln in net.internal_lanes.values() if ln.allows(vclass)]
-        a, b, hw = [], [], []
-        for ln in lanes:
-            sh = np.asarray(ln.shape, dtype=float)
-            if len(sh) < 2:
-                continue
-            a.append(sh[:-1])
-            b.append(sh[1:])
-            hw.append(np.full(len(sh) - 1, ln.width / 2.0))
-        self.a = np.concatenate(a) if a else np.zeros((0, 2))
-        self.b = np.concatenate(b) if b else np.zeros((0, 2))
-        self.hw = np.concatenate(hw) if hw else np.zeros(0)
-        self.tol = tol
-        mid = (self.a + self.b) / 2.0
-        half = np.hypot(*(self.b - self.a).T) / 2.0 if len(self.a) else np.zeros(0)
-        self.radius = float(half.max() + self.hw.max() + tol) if len(self.a) else 0.0
-        self.tree = cKDTree(mid if len(mid) else np.zeros((1, 2)))
-        self.junctions = Obstacles.empty()
-        self._cache_at: FloatArray | None = None
-        self._cache = np.zeros(0, dtype=np.int64)
-        self._near_at: tuple[float, float] | None = None
-        self._near: tuple[FloatArray, ...] = ()
-        self._hot: tuple[FloatArray, ...] | None = None
-        # the same segments as rows (start x, y, direction x, y, 1 / squared length,
-        # squared reach) of plain floats
-        self._hot_rows: list[tuple[float, ...]] = []
-
-    def add_junctions(self, shapes: list[FloatArray]) -> None:
-        """Junction areas (SUMO's junction polygons) count as road too."""
-        good = []
-        for sh in shapes:
-            p = np.asarray(sh, dtype=float)
-            area2 = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
-            if abs(area2) > 1e-9:
-                good.append(p)
-        self.junctions = Obstacles.from_polygons(good) if good else Obstacles.empty()
-
-    def contains_all(self, points: FloatArray | list[tuple[float, float]], *,
-                     centre: tuple[float, float] | None = None,
-                     radius: float | None = None) -> bool:
-        """Whether every point ``(n, 2)`` of a small group (a footprint) is on the road,
-        as :meth:`contains`.
-
-        Keeps the lane segments that can reach any point within :data:`_ROAD_CACHE` / 2 of
-        where it last gathered them (by their exact distance to that place), and among
-        them the few that held the points last time: a footprint moving along a lane is
-        measured against those first, and against all gathered ones only when they do not
-        hold every point. ``centre`` [m] and ``radius`` [m]: a disc that holds the points,
-        if known (else their mean and largest distance from it). ``points`` may be a list
-        of ``(x, y)`` pairs.
-        """
-        if not len(self.a):
-            return False
-        tried = False
-        if centre is not None and radius is not None and radius <= _ROAD_CACHE / 2.0:
-            cx, cy = centre
-            if (self._near_at is not None and self._hot_rows
-                    and math.hypot(cx - self._near_at[0], cy - self._near_at[1])
-                    <= _ROAD_CACHE / 2.0):
-                if _in_rows(points, self._hot_rows):
-                    return True  # as below, the common case without arrays
-                tried = True
-        pts = np.asarray(points, dtype=float).reshape(-1, 2)
-        if centre is None or radius is None:
-            cx, cy = pts.mean(axis=0).tolist()
-            spread = float(np.sqrt(((pts[:, 0] - cx) ** 2 + (pts[:, 1] - cy) ** 2).max()))
-        else:
-            (cx, cy), spread = centre, radius
-        if spread > _ROAD_CACHE / 2.0:
-            return bool(self.contains(pts).all())
-        if (self._near_at is None
-                or math.hypot(cx - self._near_at[0], cy - self._near_at[1]) > _ROAD_CACHE / 2.0):
-            self._gather(cx, cy)
-        if not tried and self._hot is not None and _in_bands(pts, self._hot).all():
-            return True
-        near = self._near
-        if len(near[0]):
-            within = _in_bands(pts, near, per_segment=True)  # (n, k)
-            on = within.any(axis=1)
-            hot = within.any(axis=0)
-            self._hot = tuple(v[hot] for v in near) if hot.any() else None
-            self._hot_rows = (list(zip(*(v.tolist() for v in self._hot), strict=True))
-                              if self._hot is not None else [])
-            if on.all():
-                return True
-        else:
-            on = np.zeros(len(pts), dtype=bool)
-        if not len(self.junctions):
-            return False
-        rest = pts[~on]
-        near_j = self.junctions.near(rest, 1.0)
-        return bool(len(near_j) and (near_j.distance(rest) <= self.tol).all())
-
-    def _gather(self, cx: float, cy: float) -> None:
-        """Lane segments within reach (half width plus tolerance) of any point within
-        :data:`_ROAD_CACHE` of ``(cx, cy)``."""
-        from splineplan.geometry import point_segment_distance
-
-        centre = np.array([cx, cy])
-        idx = np.asarray(self.tree.query_ball_point(centre, self.radius + _ROAD_CACHE),
-                         dtype=np.int64)
-        if len(idx):
-            d = point_segment_distance(centre, self.a[idx], self.b[idx])
-            idx = idx[d - self.hw[idx] - self.tol <= _ROAD_CACHE]
-        a, ab, hw = self.a[idx], self.b[idx] - self.a[idx], self.hw[idx]
-        ln2 = ab[:, 0] ** 2 + ab[:, 1] ** 2
-        self._near = (a[:, 0].copy(), a[:, 1].copy(), ab[:, 0].copy(), ab[:, 1].copy(),
-                      1.0 / np.where(ln2 > 0, ln2, 1.0), (hw + self.tol) ** 2)
-        self._near_at = (cx, cy)
-        self._hot = None
-        self._hot_rows = []
-
-    def contains(self, points: FloatArray) -> np.ndarray:
-        """``(n,)`` booleans: the point is within a lane's half width of its centre line."""
-        from splineplan.geometry import point_segment_distance
-
-        pts = np.asarray(points, dtype=float).reshape(-1, 2)
-        if not len(self.a):
-            return np.zeros(len(pts), dtype=bool)
-        centre = pts.mean(axis=0)
-        spread = float(np.hypot(*(pts - centre).T).max())
-        if (self._cache_at is None or spread > _ROAD_CACHE / 2.0
-                or float(np.hypot(*(centre - self._cache_at))) > _ROAD_CACHE / 2.0):
-            # segments that can reach any point within _ROAD_CACHE of this centre
-            self._cache_at = centre
-            self._cache = np.asarray(self.tree.query_ball_point(
-                centre, self.radius + _ROAD_CACHE + spread), dtype=np.int64)
-        idx = self._cache
-        if not len(idx):
-            return np.zeros(len(pts), dtype=bool)
-        a, b, hw = self.a[idx], self.b[idx], self.hw[idx]
-        d = point_segment_distance(pts[:, None, :], a[None], b[None])
-        on: np.ndarray = np.asarray(((d - hw[None]) <= self.tol).any(axis=1))
-        if not on.all() and len(self.junctions):
-            near_j = self.junctions.near(pts[~on], 1.0)
-            if len(near_j):
-                on[~on] = near_j.distance(pts[~on]) <= self.tol
-        return np.asarray(on)
-
-
-def _in_bands(pts: FloatArray, segs: tuple[FloatArray, ...], *, per_segment: bool = False
-              ) -> np.ndarray:
-    """Whether points ``(n, 2)`` lie within the bands of lane segments ``segs`` (start x, y,
-    direction x, y, 1 / squared length, squared reach): ``(n,)``, or ``(n, k)`` per segment."""
-    ax, ay, abx, aby, inv, lim2 = segs
-    dx = pts[:, 0, None] - ax  # (n, k)
-    dy = pts[:, 1, None] - ay
-    t = np.minimum(np.maximum((dx * abx + dy * aby) * inv, 0.0), 1.0)
-    ex = dx - t * abx
-    ey = dy - t * aby
-    within: np.ndarray = np.asarray((ex * ex + ey * ey) <= lim2)
-    return within if per_segment else np.asarray(within.any(axis=1))
-
-
-def _in_rows(pts: Any, rows: list[tuple[float, ...]]) -> bool:
-    """Whether every point ``(x, y)`` lies within the band of some lane segment of ``rows``
-    (as :func:`_in_bands`, with plain floats: a few points against a few segments)."""
-    for px, py in pts:
-        for ax, ay, abx, aby, inv, lim2 in rows:
-            dx, dy = px - ax, py - ay
-            t = (dx * abx + dy * aby) * inv
-            t = 0.0 if t < 0.0 else 1.0 if t > 1.0 else t
-            ex, ey = dx - t * abx, dy - t * aby
-            if ex * ex + ey * ey <= lim2:
-                break
-        else:
-            return False
-    return True
-
-
-class _Others:
-    """The vehicles around the ego at one step, as arrays (internal).
-
-    ``front`` ``(k, 2)`` [m] is SUMO's position (middle of the front bumper), ``head``
-    ``(k,)`` [rad] the heading, ``centre`` ``(k, 2)`` [m] the centre (``cx``, ``cy`` its
-    columns), ``radius`` ``(k,)`` [m] the bounding circle's.
-    """
-
-    __slots__ = (
-        "centre",
-        "cos",
-        "cx",
-        "cy",
-        "front",
-        "head",
-        "ids",
-        "length",
-        "n",
-        "n_stopped",
-        "radius",
-        "sin",
-        "speed",
-        "stopped",
-        "width",
-    )
-
-    def __init__(self, ids: list[str], a: FloatArray, stopped_speed: float) -> None:
-        """``a`` ``(k, 7)``: x, y, SUMO angle [deg], length, width, speed, stop state."""
-        self.ids = ids
-        self.n = len(ids)
-        self.front = a[:, :2]
-        self.head = np.radians(90.0 - a[:, 2])  # as heading_from_sumo_angle
-        self.cos = np.cos(self.head)
-        self.sin = np.sin(self.head)
-        self.length = a[:, 3]
-        self.width = a[:, 4]
-        self.speed = a[:, 5]
-        state = a[:, 6]
-        if state.any():  # at a stop or parked (bits 1, 2) and standing
-            self.stopped = ((state.astype(np.int64) & 3) > 0) & (self.speed < stopped_speed)
-            self.n_stopped = int(np.count_nonzero(self.stopped))
-        else:
-            self.stopped = np.zeros(self.n, dtype=bool)
-            self.n_stopped = 0
-        half = 0.5 * self.length
-        self.centre = np.empty((self.n, 2))
-        np.subtract(a[:, 0], half * self.cos, out=self.centre[:, 0])
-        np.subtract(a[:, 1], half * self.sin, out=self.centre[:, 1])
-        self.cx = self.centre[:, 0]
-        self.cy = self.centre[:, 1]
-        self.radius = 0.5 * np.hypot(self.length, self.width)
-
-
-_NO_OTHERS = _Others([], np.zeros((0, 7)), 0.0)
-
-
-def _box_corners(x: float, y: float, h: float, length: float, width: float
-                 ) -> list[tuple[float, float]]:
-    """Corners (4 points x, y) [m] of a rectangle from its centre and heading [rad] (rear
-    right first, counter-clockwise), as :func:`splineplan.metrics.footprint`."""
-    c, s = math.cos(h), math.sin(h)
-    hl, hw = length / 2.0, width / 2.0
-    return [(x - hl * c + hw * s, y - hl * s - hw * c),
-            (x + hl * c + hw * s, y + hl * s - hw * c),
-            (x + hl * c - hw * s, y + hl * s + hw * c),
-            (x - hl * c - hw * s, y - hl * s + hw * c)]
-
-
 @dataclass(frozen=True)
 class _Cut:
     """The drivable start of a trajectory whose end came too near an obstacle."""
@@ -1825,67 +1585,6 @@ def _interp(u: float, s: list[float], v: list[float]) -> float:
     if len(s) < 2:
         return v[0]
     return v[j] + f * (v[j + 1] - v[j])
-
-
-def _probe_points(cx: float, cy: float, c: float, s: float, hl: float, hw: float
-                  ) -> list[tuple[float, float]]:
-    """Corners, centre and edge midpoints (9 points x, y) of a rectangle [m] from its
-    centre, heading's cosine and sine, half length and half width."""
-    fx, fy, lx, ly = c * hl, s * hl, -s * hw, c * hw
-    return [(cx - fx - lx, cy - fy - ly), (cx + fx - lx, cy + fy - ly),
-            (cx + fx + lx, cy + fy + ly), (cx - fx + lx, cy - fy + ly), (cx, cy),
-            (cx + fx, cy + fy), (cx + lx, cy + ly), (cx - fx, cy - fy), (cx - lx, cy - ly)]
-
-
-def _next_in_circle(xs: list[float], ys: list[float], i: int, cx: float, cy: float,
-                    r: float, step: float) -> int:
-    """The first index from ``i`` on of the path samples (``xs``, ``ys``) [m] within ``r``
-    [m] of ``(cx, cy)``; -1 if none is.
-
-    Consecutive samples are at most ``step`` [m] apart, so a sample at distance ``d > r``
-    rules out the next ``(d - r) / step`` ones: the walk jumps over them (plain floats, a
-    few jumps along a path of hundreds of samples)."""
-    n = len(xs)
-    r2 = r * r
-    while i < n:
-        dx, dy = xs[i] - cx, ys[i] - cy
-        d2 = dx * dx + dy * dy
-        if d2 <= r2:
-            return i
-        if step <= 0.0:  # all samples at one point
-            return -1
-        i += max(int((math.sqrt(d2) - r) / step), 1)
-    return -1
-
-
-def _first_in_reach(pts: list[tuple[float, float]], lo: int,
-                    circle: tuple[float, float, float, float],
-                    xs: list[float], ys: list[float], reach2: float) -> int:
-    """The first path sample index from ``lo`` on whose point (``xs``, ``ys``) [m] is within
-    ``sqrt(reach2)`` [m] of any of the points ``pts``; -1 if none is.
-
-    ``circle``: centre x, y [m] and radius [m] of a circle that holds every point within
-    reach of ``pts``, and the largest distance [m] between consecutive samples; only the
-    samples in it are tried (:func:`_next_in_circle`). Plain floats: a handful of points
-    against a handful of samples, stopping at the first hit, costs less than arrays."""
-    cx, cy, r, step = circle
-    i = _next_in_circle(xs, ys, lo, cx, cy, r, step)
-    while i >= 0:
-        qx, qy = xs[i], ys[i]
-        for px, py in pts:
-            ex, ey = px - qx, py - qy
-            if ex * ex + ey * ey <= reach2:
-                return i
-        i = _next_in_circle(xs, ys, i + 1, cx, cy, r, step)
-    return -1
-
-
-def _safe_speed(gap: float, v_leader: float, b: float, tau: float) -> float:
-    """Krauss's safe speed [m/s]: stop behind a leader braking at ``b`` after a gap [m]."""
-    disc = (b * tau) ** 2 + v_leader**2 + 2.0 * b * gap
-    if disc <= 0.0:
-        return 0.0
-    return max(-b * tau + math.sqrt(disc), 0.0)
 
 
 def _lane_index(lane_id: str) -> int:
