@@ -684,8 +684,8 @@ def _junction_band(incoming: list[Lane], outgoing: list[Lane]
 
 #: Handles of :func:`_kerb_curve` relative to a circular arc's: a little longer, so that the
 #: curve keeps nearer the corner, as SUMO's own rounded kerbs do (measured against the lanes
-#: and junction outlines of the bundled networks: 1.0 left slivers of the inner kerb off the
-#: paved area, 1.2 cut into the outer side of narrow streets).
+#: and junction outlines of ten grid routes: 5.5 m^2 of corridor off the paved area at 1.0,
+#: 1.2 m^2 at 1.1, 1.8 m^2 at 1.2).
 KERB_HANDLE = 1.1
 
 
