@@ -20,14 +20,9 @@ def heading_from_sumo_angle(angle_deg: ArrayLike) -> FloatArray:
     return np.asarray(np.radians(90.0 - np.asarray(angle_deg, dtype=float)), dtype=float)
 
 
-def sumo_angle_from_heading(heading: ArrayLike) -> FloatArray:
-    """SUMO's angle [deg, 0 = north, clockwise, in [0, 360)] from a heading [rad]."""
-    return np.asarray(np.mod(90.0 - np.degrees(np.asarray(heading, dtype=float)), 360.0))
-
-
-def sumo_angle_from_heading_scalar(heading: float) -> float:
-    """:func:`sumo_angle_from_heading` of one heading [rad], with plain floats (the same
-    value, without array set-up)."""
+def sumo_angle_from_heading(heading: float) -> float:
+    """SUMO's angle [deg, 0 = north, clockwise, in [0, 360)] from a heading [rad] (plain
+    floats: it runs once a simulation step)."""
     return (90.0 - math.degrees(heading)) % 360.0
 
 

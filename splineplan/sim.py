@@ -68,7 +68,7 @@ from splineplan.errors import (
 from splineplan.geometry import (
     FloatArray,
     heading_from_sumo_angle,
-    sumo_angle_from_heading_scalar,
+    sumo_angle_from_heading,
 )
 from splineplan.metrics import (
     CURVATURE_SPAN,
@@ -86,7 +86,6 @@ from splineplan.traffic import (
     Others,
     RoadCheck,
     first_in_reach,
-    footprint_corners,
     next_in_circle,
     probe_points,
     safe_speed,
@@ -729,7 +728,9 @@ class _Run:
         within 2 m.
         """
         ego, o = self.sc.ego, self.others
-        corners = footprint_corners(x, y, h, ego.length, ego.width)
+        # corners, centre and edge midpoints; the centre is not needed by the road check
+        pts = probe_points(x, y, math.cos(h), math.sin(h), ego.length / 2.0, ego.width / 2.0)
+        corners = pts[:4]
         clear_obs = clear_veh = math.inf
         r_ego = 0.5 * math.hypot(ego.length, ego.width)
         if o.n:
@@ -753,10 +754,7 @@ class _Run:
             near = self.polygons.near(ego_box, self.sc.sim.lookahead)
             if len(near):
                 clear_obs = min(clear_obs, float(near.distance(ego_box).min()))
-        # the corners and the edges' midpoints
-        probe = corners + [(0.5 * (ax + bx), 0.5 * (ay + by))
-                           for (ax, ay), (bx, by) in zip(corners, corners[1:] + corners[:1],
-                                                         strict=True)]
+        probe = corners + pts[5:]
         off_road = not self.road.contains_all(probe, centre=(x, y), radius=r_ego)
         return clear_obs, clear_veh, off_road
 
@@ -1352,7 +1350,7 @@ class _Run:
             x, y, h = (float(v) for v in self.pose)
         fx = x + ego.length / 2.0 * math.cos(h)
         fy = y + ego.length / 2.0 * math.sin(h)
-        angle = sumo_angle_from_heading_scalar(h)
+        angle = sumo_angle_from_heading(h)
         assert self.corridor is not None
         edge = self._edge_at(self.station)
         if self._lane_of[0] != self.last_lane:

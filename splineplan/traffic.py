@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from splineplan.geometry import FloatArray
+from splineplan.geometry import FloatArray, heading_from_sumo_angle
 from splineplan.obstacles import Obstacles
 
 #: How far [m] a footprint point may stick out of the lane bands and junction areas before it
@@ -236,7 +236,7 @@ class Others:
         self.ids = ids
         self.n = len(ids)
         self.front = a[:, :2]
-        self.head = np.radians(90.0 - a[:, 2])  # as heading_from_sumo_angle
+        self.head = heading_from_sumo_angle(a[:, 2])
         self.cos = np.cos(self.head)
         self.sin = np.sin(self.head)
         self.length = a[:, 3]
@@ -259,18 +259,6 @@ class Others:
 
 
 NO_OTHERS = Others([], np.zeros((0, 7)), 0.0)
-
-
-def footprint_corners(x: float, y: float, h: float, length: float, width: float
-                      ) -> list[tuple[float, float]]:
-    """Corners (4 points x, y) [m] of a rectangle from its centre and heading [rad] (rear
-    right first, counter-clockwise), as :func:`splineplan.metrics.footprint`."""
-    c, s = math.cos(h), math.sin(h)
-    hl, hw = length / 2.0, width / 2.0
-    return [(x - hl * c + hw * s, y - hl * s - hw * c),
-            (x + hl * c + hw * s, y + hl * s - hw * c),
-            (x + hl * c - hw * s, y + hl * s + hw * c),
-            (x - hl * c - hw * s, y - hl * s + hw * c)]
 
 
 def probe_points(cx: float, cy: float, c: float, s: float, hl: float, hw: float
