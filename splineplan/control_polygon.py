@@ -168,7 +168,8 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
 
     Equation (3) moves a point to its neighbours' mean, which drives exactly this sum down;
     this is its fixed point within the bands, found at once: the Hessian is banded
-    (pentadiagonal), solved by banded Cholesky inside a primal active-set loop.
+    (pentadiagonal), solved by banded Cholesky, first in a primal-dual active-set loop
+    (fast, usually exact), then in a primal active-set loop that ends at the optimum.
     """
     from scipy.linalg import solveh_banded
 

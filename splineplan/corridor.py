@@ -75,10 +75,9 @@ class Corridor:
             )
         if len(self.edges) != len(self.edge_starts):
             raise GeometryError("corridor needs one start station per edge")
-        if (self.keep_left is None) != (self.keep_right is None) or (
-                self.keep_left is not None and self.keep_right is not None
-                and (self.keep_left.shape != self.s.shape
-                     or self.keep_right.shape != self.s.shape)):
+        keeps = (self.keep_left, self.keep_right)
+        if (keeps[0] is None) != (keeps[1] is None) or any(
+                k is not None and k.shape != self.s.shape for k in keeps):
             raise GeometryError("corridor needs both keep offsets, one per station, or none")
         for name in ("reference", "s", "left", "right", "edge_starts", "keep_left",
                      "keep_right"):

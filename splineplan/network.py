@@ -412,13 +412,15 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
 
     On each route edge the area spans from the right side of its rightmost lane that
     ``vclass`` may use to the left side of its leftmost such lane (lanes between them
-    count as drivable). Through a junction it spans from those of its lanes that connect
-    to the next route edge to the allowed lanes of that edge, each side a kerb curve rounded
-    as SUMO rounds a junction's
+    count as drivable). Through a junction it spans from those lanes to the allowed lanes
+    of the next route edge, each side a kerb curve rounded as SUMO rounds a junction's
     corners (:func:`_junction_band`), so that a turn has the room of both roads and not
     only of one internal lane; where the turn is too sharp for that, it spans the internal
-    lanes of the allowed connections, from the rightmost to the leftmost. The reference
-    line runs midway between the two boundaries. Junction stretches count towards the
+    lanes of the allowed connections, from the rightmost to the leftmost. Over the last
+    :data:`APPROACH_LENGTH` metres of each edge but the first, the keep offsets hold the
+    vehicle's centre to the lanes that connect to the next route edge (SUMO maps a vehicle
+    into the junction, and its signals and right of way hold, only from those). The
+    reference line runs midway between the two boundaries. Junction stretches count towards the
     edge before them in ``edge_at``. The corridor covers the whole first edge (also when
     the route starts at ``start_pos > 0``).
 

@@ -162,12 +162,18 @@ def plan_corridor(
     return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
 
 
+def _infeasible_samples(tr: Trajectory, kappa_max: float) -> NDArray[np.bool_]:
+    """Per sample: curvature over ``kappa_max`` [1/m], or the footprint within the margin
+    (with level 3's tolerance for rounding)."""
+    return ((np.abs(tr.curvature) > kappa_max * (1.0 + 1e-6))
+            | (tr.clearance_obstacles < tr.safety_margin - 1e-6)
+            | (tr.clearance_road < tr.safety_margin - 1e-6))
+
+
 def _fails_near_start(tr: Trajectory, reach: float, kappa_max: float) -> bool:
     """Whether the trajectory's first infeasible sample lies within ``reach`` [m] of its
-    start (curvature over ``kappa_max`` [1/m], or the footprint within the margin)."""
-    bad = ((np.abs(tr.curvature) > kappa_max) | (tr.clearance_obstacles < tr.safety_margin)
-           | (tr.clearance_road < tr.safety_margin))
-    hits = np.flatnonzero(bad)
+    start."""
+    hits = np.flatnonzero(_infeasible_samples(tr, kappa_max))
     return bool(len(hits)) and float(tr.s[hits[0]] - tr.s[0]) <= reach
 
 
@@ -259,10 +265,7 @@ def _head(tr: Trajectory, n: int, kappa_max: float) -> Trajectory:
                    clearance_road=tr.clearance_road[:n])
     if tr.feasible:
         return head
-    ok = (np.all(head.clearance_obstacles >= tr.safety_margin - 1e-6)
-          and np.all(head.clearance_road >= tr.safety_margin - 1e-6)
-          and np.all(np.abs(head.curvature) <= kappa_max * (1.0 + 1e-6)))
-    return replace(head, feasible=bool(ok))
+    return replace(head, feasible=not _infeasible_samples(head, kappa_max).any())
 
 
 def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,

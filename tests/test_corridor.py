@@ -120,3 +120,28 @@ def test_malformed_corridors_raise() -> None:
         Corridor.from_reference([[0, 0], [10, 0]], [1, 1, 1], [-1, -1])
     with pytest.raises(GeometryError):
         Corridor.from_reference([[0, 0], [10, 0]], [1, 1], [-1, -1], edges=("a",))
+
+
+def test_keep_offsets_are_checked_sliced_and_unbounded_by_default() -> None:
+    """Keep offsets come in pairs, one value per station; a slice carries them at its
+    stations; without them ``keep_at`` is unbounded."""
+    from splineplan.corridor import UNBOUNDED
+
+    ref = np.array([[0.0, 0.0], [100.0, 0.0]])
+    plain = Corridor.from_reference(ref, np.full(2, 3.2), np.full(2, -3.2))
+    n = len(plain.s)
+    right, left = plain.keep_at([0.0, 50.0])
+    assert np.all(right == -UNBOUNDED) and np.all(left == UNBOUNDED)
+    keep_l = np.where(plain.s > 70.0, 0.0, UNBOUNDED)
+    keep_r = np.where(plain.s > 70.0, -3.2, -UNBOUNDED)
+    kept = Corridor(plain.reference, plain.s, plain.left, plain.right,
+                    keep_left=keep_l, keep_right=keep_r)
+    part = kept.slice(60.0, 90.0)
+    r, lft = part.keep_at([5.0, 20.0])  # stations 65 and 80 of the whole
+    assert lft[0] == UNBOUNDED and r[0] == -UNBOUNDED
+    assert lft[1] == pytest.approx(0.0) and r[1] == pytest.approx(-3.2)
+    with pytest.raises(GeometryError, match="keep offsets"):
+        Corridor(plain.reference, plain.s, plain.left, plain.right, keep_left=keep_l)
+    with pytest.raises(GeometryError, match="keep offsets"):
+        Corridor(plain.reference, plain.s, plain.left, plain.right,
+                 keep_left=keep_l[: n - 1], keep_right=keep_r[: n - 1])
