@@ -10,6 +10,7 @@ from) and from the sampling of the final curve (:mod:`splineplan.trajectory`).
 
 from __future__ import annotations
 
+import itertools
 import logging
 from dataclasses import dataclass
 
@@ -22,6 +23,10 @@ from splineplan.geometry import FloatArray
 from splineplan.trajectory_params import TrajectoryParams
 
 log = logging.getLogger(__name__)
+
+#: Room [m] beyond the safety margin that a sideways push of the curve aims for (see
+#: :func:`_push`).
+PUSH_EXTRA = 0.03
 
 
 # ---- spline set-up ---------------------------------------------------------------------
@@ -210,7 +215,84 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
         rounds += 1
     # the least violating curve seen (the first clear one, if any)
     assert best is not None
-    return best[1], best[2], best[3], best[4]
+    curve, samples = best[1], best[4]
+    pushes = 0
+    if best[0][0] > 0:
+        curve, samples, pushes = _push(curve, samples, checker, params)
+    return curve, best[2] + pushes, best[3], samples
+
+
+def _push(curve: _Curve, samples: tuple[FloatArray, ...], checker: _Checker,
+          params: TrajectoryParams) -> tuple[_Curve, tuple[FloatArray, ...], int]:
+    """The curve shifted sideways where its footprint comes within the margin of one road
+    edge while the other edge leaves room (a lane's curve that cuts a corner a few
+    centimetres too far): the control points that shape each such sample move along the
+    road's normal by what it lacks (plus :data:`PUSH_EXTRA`), as far as the other side
+    allows, so that the curve there moves by as much (a B-spline's basis sums to one).
+
+    A round (else half of it) is kept only if it lowers the largest footprint violation, or
+    the total at an equal largest, without raising the curve's largest curvature above
+    the turning limit or its former value; at most ``repair_rounds`` rounds. Returns the
+    curve, its samples (as :func:`_refine`) and the rounds kept.
+    """
+    pos, d1, d2, slack, sc = samples
+
+    def score(sl: FloatArray) -> tuple[float, float]:
+        over = np.maximum(-sl, 0.0)
+        return float(np.round(over.max(), 9)), float(over.sum())
+
+    best = score(slack)
+    bend_best = float(np.abs(curvature_from_derivatives(d1, d2)).max())
+    n, k, m = len(curve.ctrl), curve.k, checker.margin
+    kept = 0
+    for _ in range(params.repair_rounds):
+        bad = np.flatnonzero(slack < 0)
+        if len(bad) == 0:
+            break
+        cl, cr = checker.road(pos[bad], np.arctan2(d1[bad, 1], d1[bad, 0]), sc[bad],
+                              sides=True)
+        # positive: to the left; nothing where both edges or neither (an obstacle) is close
+        shift = np.where((cr < m) & (cl >= m), np.minimum(m - cr + PUSH_EXTRA, cl - m), 0.0)
+        shift = np.where((cl < m) & (cr >= m), -np.minimum(m - cl + PUSH_EXTRA, cr - m), shift)
+        go = np.flatnonzero(np.abs(shift) > 1e-9)
+        if len(go) == 0:
+            break
+        h = checker.corridor.heading_at(sc[bad[go]])
+        vec = shift[go, None] * np.column_stack((-np.sin(h), np.cos(h)))
+        move = np.zeros_like(curve.ctrl)
+        size = np.zeros(n)
+        for j, v, a in zip(bad[go].tolist(), vec, np.abs(shift[go]), strict=True):
+            cols = np.arange(int(curve.first[j]), int(curve.first[j]) + k + 1)
+            cols = cols[(cols >= 2) & (cols <= n - 2) & (size[cols] < a)]
+            move[cols], size[cols] = v, a
+        # copies of a doubled control point move together (apart, they would make a short
+        # leg, a curvature spike)
+        for a, b in _runs(curve.pool_index):
+            j = a + int(np.argmax(size[a:b]))
+            move[a:b], size[a:b] = move[j], size[j]
+        if not size.any():
+            break
+        for scale in (1.0, 0.5):  # the whole push, else half of it
+            cand = _Curve.build(curve.ctrl + scale * move, curve.pool_index, params.degree,
+                                params.sample_spacing)
+            p2, e1, e2 = cand.evaluate()
+            s2, c2 = checker.slack(p2, np.arctan2(e1[:, 1], e1[:, 0]))
+            new = score(s2)
+            bend = float(np.abs(curvature_from_derivatives(e1, e2)).max())
+            if new < best and bend <= max(bend_best, params.kappa_max) + 1e-12:
+                break
+        else:
+            break
+        curve, best, bend_best, kept = cand, new, bend, kept + 1
+        pos, d1, d2, slack, sc = p2, e1, e2, s2, c2
+    return curve, (pos, d1, d2, slack, sc), kept
+
+
+def _runs(values: NDArray[np.int64]) -> list[tuple[int, int]]:
+    """Start and end ``[a, b)`` of each run of two or more equal consecutive values."""
+    cut = np.flatnonzero(np.diff(values) != 0) + 1
+    bounds = np.concatenate(([0], cut, [len(values)]))
+    return [(int(a), int(b)) for a, b in itertools.pairwise(bounds) if b - a > 1]
 
 
 class _Optimiser:

@@ -27,7 +27,10 @@ Steps, and the choices beyond the paper:
    ``|P_{i-1} - 2 P_i + P_{i+1}| / 6`` for a cubic). Where the first curve's footprint is not
    clear, the left-out roadmap vertex nearest the violation comes back; where none is left,
    the control point nearest it is doubled (repeated control points pull the curve onto
-   the polygon); a few rounds, and the least violating curve is kept.
+   the polygon); a few rounds, and the least violating curve is kept. Where it still comes
+   within the margin of one road edge while the other leaves room (a lane's curve cutting
+   a corner by a few centimetres), the control points that shape it move sideways by what
+   it lacks (:func:`~splineplan.optimiser._push`).
 4. Equation (3). "Nearest" control point: nearest in parameter, by Greville abscissa, among
    the ``degree + 1`` control points that shape the curve at that point; if it may not
    move, the next nearest of those. Moves whose supports do not overlap commute, so each
@@ -37,7 +40,8 @@ Steps, and the choices beyond the paper:
 5. Feasibility: the footprint is the vehicle's rectangle centred on the curve and oriented
    along it; its distance to each nearby obstacle polygon is exact (culled by bounding
    box); on the road its corners and long-side midpoints keep the margin from the road
-   edges (the corridor is extended past its ends). Curvature above ``1 / min_turn_radius``
+   edges (the corridor is extended past its ends), and so do the edges' vertices that
+   point into the road, which can meet the footprint's sides between those points. Curvature above ``1 / min_turn_radius``
    is infeasible. A curve that starts infeasible is not refused outright: a move is then
    kept if no feasible sample becomes infeasible and the worst violation of the changed
    part does not grow (exactly "the new curve is feasible" when the start is feasible).

@@ -33,7 +33,9 @@ class TrajectoryParams:
     sample_spacing
         Spacing [m] of the trajectory's samples along the curve.
     min_turn_radius
-        Smallest turning radius [m] of the vehicle: a hard limit on the curvature.
+        Smallest turning radius [m] of the path of the vehicle's centre (the middle of its
+        rectangle): a hard limit on the curvature. A compact car with a 10.9 m turning
+        circle (kerb to kerb) and a 2.6 m wheelbase turns its centre on about 4.2 m.
     max_iterations
         Cap on the number of control-point moves tried.
     patience
@@ -71,7 +73,7 @@ class TrajectoryParams:
     a_max: float = 2.0
     b_max: float = 4.0
     sample_spacing: float = 0.5
-    min_turn_radius: float = 5.0
+    min_turn_radius: float = 4.2
     max_iterations: int = 5000
     band_fraction: float = 0.8
     max_control_spacing: float = 25.0

@@ -16,6 +16,7 @@ from splineplan.cli import main
 from splineplan.network import load_network, read_obstacles
 from splineplan.pipeline import plan
 from splineplan.route import shortest_route
+from splineplan.trajectory import TrajectoryParams
 
 ROOT = Path(__file__).resolve().parent.parent
 NETS = ROOT / "sumo_nets"
@@ -143,7 +144,7 @@ def test_junction_turns_are_feasible_and_stay_on_the_pavement(grid, start: str,
     tr = result.trajectory
     rp = result.roadmaps[0].params
     assert tr.feasible
-    assert float(np.max(np.abs(tr.curvature))) <= 1.0 / 5.0 + 1e-9
+    assert float(np.max(np.abs(tr.curvature))) <= TrajectoryParams().kappa_max + 1e-9
     base = box(-rp.vehicle_length / 2, -rp.vehicle_width / 2,
                rp.vehicle_length / 2, rp.vehicle_width / 2)
     swept = unary_union([

@@ -12,7 +12,7 @@ from splineplan.corridor import Corridor
 from splineplan.obstacles import Obstacles
 from splineplan.planner import CorridorPlan, plan_corridor
 from splineplan.roadmap import RoadmapParams
-from splineplan.trajectory import Trajectory
+from splineplan.trajectory import Trajectory, TrajectoryParams
 
 
 def curved_corridor() -> tuple[Corridor, Obstacles]:
@@ -97,7 +97,7 @@ def test_one_km_obstacle_field_is_feasible_and_continuous_at_the_joins(seed: int
     assert len(roadmaps) == 4
     assert tr.feasible
     assert footprint_violations(tr, cor, obs, rp) == (0, 0)
-    assert np.abs(tr.curvature).max() <= 1.0 / 5.0 + 1e-9
+    assert np.abs(tr.curvature).max() <= TrajectoryParams().kappa_max + 1e-9
     # each later segment starts on the curve, with the curve's heading and speed there
     for rm in roadmaps[1:]:
         d = np.hypot(tr.x - rm.start_xy[0], tr.y - rm.start_xy[1])

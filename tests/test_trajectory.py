@@ -111,9 +111,11 @@ def test_curvature_forms_agree_on_a_circle(radius: float) -> None:
 
 
 def test_discrete_curvature_of_the_planned_spline_matches_derivatives() -> None:
+    # equation (2) is a finite difference: samples 2 cm apart, finer than the first curve's
+    # changes of curvature (it turns from 0.23 to 0 1/m within 0.3 m after the lead-in)
     road = straight_road()
     tr = plan_trajectory(make_roadmap(sine_path(), road), road, Obstacles.empty(),
-                         TrajectoryParams(max_iterations=0, sample_spacing=0.1), 0.0)
+                         TrajectoryParams(max_iterations=0, sample_spacing=0.02), 0.0)
     h = float(np.diff(tr.s).mean())
     away = (tr.s > 3.0) & (tr.s < tr.length - 3.0)  # clamped ends: fewer neighbours
     k_disc = curvature_discrete(tr.xy, h)[away]
@@ -210,7 +212,8 @@ def test_every_accepted_move_keeps_the_curve_feasible() -> None:
 
 
 def test_infeasible_start_is_reported_not_hidden() -> None:
-    """Walls force a 6 m lateral jump within 2 m: no curve of radius >= 5 m does it."""
+    """Walls force a 6 m lateral jump within 2 m: no curve within the turning radius does
+    it."""
     road = straight_road()
     xs = np.arange(0.0, 60.5, 1.0)
     lat = np.where(xs < 30, -3.0, 3.0)
@@ -220,6 +223,96 @@ def test_infeasible_start_is_reported_not_hidden() -> None:
     assert not tr.feasible
     assert (np.abs(tr.curvature).max() > TP.kappa_max
             or tr.min_clearance < RoadmapParams().safety_margin)
+
+
+def kinked_lane(angle_deg: float, width: float = 3.2) -> tuple[Corridor, Polygon]:
+    """One lane of ``width`` [m] whose centre line turns by ``angle_deg`` 60 m in, with
+    mitred edges as SUMO draws lane shapes (polylines, not rounded): the corridor between
+    its edges around a smoothed centre line, as for a route, and the lane by shapely."""
+    from scipy.ndimage import gaussian_filter1d
+
+    a = np.deg2rad(angle_deg)
+    centre = LineString([(0.0, 0.0), (60.0, 0.0), (60.0 + 60.0 * np.cos(a), 60.0 * np.sin(a))])
+    left = np.asarray(centre.offset_curve(width / 2.0, join_style="mitre").coords)
+    right = np.asarray(centre.offset_curve(-width / 2.0, join_style="mitre").coords)
+    dense = np.array([centre.interpolate(d).coords[0]
+                      for d in np.arange(0.0, centre.length + 0.25, 0.5)])
+    smooth = gaussian_filter1d(dense, 4.0, axis=0, mode="nearest")
+    smooth[0], smooth[-1] = dense[0], dense[-1]
+    lane = centre.buffer(width / 2.0, cap_style="flat", join_style="mitre")
+    return Corridor.from_boundaries(left, right, reference=smooth), lane
+
+
+def lane_clearance(tr: Trajectory, corridor: Corridor, lane: Polygon, rp: RoadmapParams
+                   ) -> float:
+    """Smallest distance [m] by shapely from the footprint to the lane's edges (negative:
+    off the lane), away from the lane's ends."""
+    st = corridor.to_sl(tr.xy)[:, 0]
+    inner = (st > rp.vehicle_length) & (st < corridor.length - rp.vehicle_length)
+    return min(lane.exterior.distance(fp) if lane.contains(fp) else -fp.difference(lane).area
+               for fp, ok in zip(footprints(tr, rp), inner, strict=True) if ok)
+
+
+def test_curve_cutting_a_lane_corner_is_pushed_back_into_the_lane() -> None:
+    """A 42 degree corner of one 3.1 m lane: the first curve cuts it to 0.25 m of the edge;
+    the repair moves it sideways until the footprint keeps the margin (shapely), and
+    without repair the curve stays infeasible."""
+    corridor, lane = kinked_lane(42.0, 3.1)
+    rp = RoadmapParams()
+    rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), rp)
+    raw = plan_trajectory(rm, corridor, Obstacles.empty(), TrajectoryParams(repair_rounds=0),
+                          0.0)
+    assert not raw.feasible
+    assert lane_clearance(raw, corridor, lane, rp) < rp.safety_margin - 0.03
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(), None, 0.0)
+    assert tr.feasible and tr.iterations.refinements >= 1
+    assert lane_clearance(tr, corridor, lane, rp) >= rp.safety_margin - 1e-6
+
+
+@settings(max_examples=15, deadline=None)
+@given(angle=st.floats(5.0, 45.0), left=st.booleans(), width=st.floats(3.0, 3.6),
+       start=st.floats(-0.3, 0.3))
+def test_lane_corners_feasible_only_when_clear(angle: float, left: bool, width: float,
+                                              start: float) -> None:
+    """Random corners of one lane: a curve reported feasible keeps the margin from the
+    lane's edges by shapely, to within 0.05 m (the corridor holds the edges' offsets every
+    0.5 m of its smoothed reference, which rounds a mitred corner off a little)."""
+    corridor, lane = kinked_lane(angle if left else -angle, width)
+    rp = RoadmapParams()
+    rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, start]), rp)
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(), None, 0.0)
+    if tr.feasible:
+        assert lane_clearance(tr, corridor, lane, rp) >= rp.safety_margin - 0.05
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(5.0, 35.0), st.floats(-3.0, 3.0),
+                          st.floats(-0.5, 0.5)), min_size=1, max_size=10))
+def test_footprint_side_clearances_match_shapely(poses: list[tuple[float, float, float]]
+                                                 ) -> None:
+    """The footprint's distances to the left and to the right road edge equal shapely's,
+    and the nearer of them is the road clearance."""
+    from splineplan.footprint import _Checker
+
+    road = straight_road(40.0)
+    rp = RoadmapParams()
+    xy = np.array([(x, y) for x, y, _ in poses])
+    heading = np.array([h for _, _, h in poses])
+    checker = _Checker.build(road, Obstacles.empty(), rp, xy)
+    cl, cr = checker.road(xy, heading, None, sides=True)
+    clear, _ = checker.road(xy, heading)
+    np.testing.assert_array_equal(np.minimum(cl, cr), clear)
+    hl, hw = rp.vehicle_length / 2.0, rp.vehicle_width / 2.0
+    left, right = LineString(road.left_xy()), LineString(road.right_xy())
+    for j, (x, y, h) in enumerate(poses):
+        foot = affinity.translate(affinity.rotate(box(-hl, -hw, hl, hw), h, use_radians=True,
+                                                  origin=(0, 0)), x, y)
+        inside = Polygon(road.polygon()).contains(foot)
+        if inside:
+            assert cl[j] == pytest.approx(foot.distance(left), abs=1e-9)
+            assert cr[j] == pytest.approx(foot.distance(right), abs=1e-9)
+        else:
+            assert min(cl[j], cr[j]) <= 1e-9
 
 
 @settings(max_examples=12, deadline=None)
