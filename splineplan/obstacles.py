@@ -48,9 +48,14 @@ class Obstacles:
         self.vertices.setflags(write=False)
         self.offsets.setflags(write=False)
         bbox = np.empty((k, 4))
-        for i in range(k):
-            p = self.vertices[self.offsets[i]:self.offsets[i + 1]]
-            bbox[i] = (*p.min(axis=0), *p.max(axis=0))
+        if k and np.all(np.diff(self.offsets) > 0):
+            starts = self.offsets[:-1]
+            bbox[:, :2] = np.minimum.reduceat(self.vertices, starts, axis=0)
+            bbox[:, 2:] = np.maximum.reduceat(self.vertices, starts, axis=0)
+        else:
+            for i in range(k):
+                p = self.vertices[self.offsets[i]:self.offsets[i + 1]]
+                bbox[i] = (*p.min(axis=0), *p.max(axis=0))
         bbox.setflags(write=False)
         object.__setattr__(self, "_bbox", bbox)
 
@@ -155,18 +160,27 @@ class Obstacles:
     def subset(self, mask: ArrayLike) -> Obstacles:
         """The obstacles selected by a boolean mask or index array."""
         idx = np.arange(len(self))[np.asarray(mask)]
-        return Obstacles.from_polygons([self.polygon(i) for i in idx],
-                                       [self.ids[i] for i in idx])
+        start = self.offsets[idx]
+        count = self.offsets[idx + 1] - start
+        offsets = np.concatenate(([0], np.cumsum(count))).astype(np.int64)
+        take = np.arange(int(offsets[-1])) + np.repeat(start - offsets[:-1], count)
+        return Obstacles(self.vertices[take], offsets, tuple(self.ids[i] for i in idx))
 
     def near(self, xy: ArrayLike, radius: float) -> Obstacles:
         """The obstacles whose bounding box comes within ``radius`` [m] of any point."""
-        pts = np.atleast_2d(np.asarray(xy, dtype=float))
         if len(self) == 0:
             return self
+        hit = self.near_mask(xy, radius)
+        return self if hit.all() else self.subset(hit)
+
+    def near_mask(self, xy: ArrayLike, radius: float) -> NDArray[np.bool_]:
+        """Per obstacle: whether its bounding box meets that of the points ``(n, 2)``
+        grown by ``radius`` [m] (the test of :meth:`near`)."""
+        pts = np.atleast_2d(np.asarray(xy, dtype=float))
         lo, hi = pts.min(axis=0) - radius, pts.max(axis=0) + radius
         b = self._bbox
-        hit = (b[:, 0] <= hi[0]) & (b[:, 2] >= lo[0]) & (b[:, 1] <= hi[1]) & (b[:, 3] >= lo[1])
-        return self if hit.all() else self.subset(hit)
+        return np.asarray((b[:, 0] <= hi[0]) & (b[:, 2] >= lo[0]) & (b[:, 1] <= hi[1])
+                          & (b[:, 3] >= lo[1]))
 
     def elongated(self, directions: ArrayLike, extra: float) -> Obstacles:
         """Each obstacle swept ``extra`` [m] both ways along its direction ``(k,)`` [rad].

@@ -115,10 +115,18 @@ def plan_corridor(
     pose = np.asarray(start_xy, dtype=float).reshape(2)
     roadmaps: list[Roadmap] = []
     parts: list[Trajectory] = []
-    t_roadmap = t_traj = 0.0
     prev: Trajectory | None = None  # the previous segment's whole trajectory
+    # level 2's obstacles, elongated along the road once for the whole corridor
+    t0 = time.perf_counter()
+    grown = elongate_for_roadmap(corridor, obstacles, rp)
+    t_roadmap = time.perf_counter() - t0
+    t_traj = 0.0
     for i, seg in enumerate(pieces):
-        seg_obs = obstacles.near(seg.polygon(), 0.0) if len(obstacles) else obstacles
+        seg_obs, seg_grown = obstacles, grown
+        if len(obstacles):
+            near = obstacles.near_mask(seg.polygon(), 0.0)
+            if not near.all():
+                seg_obs, seg_grown = obstacles.subset(near), grown.subset(near)
         joins = ([-1] if prev is None else
                  join_indices(prev, pieces[i - 1], seg.offset - pieces[i - 1].offset,
                               overlap)[:JOIN_TRIES])
@@ -129,7 +137,7 @@ def plan_corridor(
             t0 = time.perf_counter()
             t1 = t0
             try:
-                rm = plan_roadmap(seg, elongate_for_roadmap(seg, seg_obs, rp), pose, rp)
+                rm = plan_roadmap(seg, seg_grown, pose, rp)
                 t1 = time.perf_counter()
                 tr = plan_trajectory(
                     rm, seg, seg_obs, tp if prev is None else tp_join,
@@ -252,7 +260,9 @@ def elongate_for_roadmap(corridor: Corridor, obstacles: Obstacles,
     extra = max(params.vehicle_length - params.vehicle_width, 0.0) / 2.0
     if not len(obstacles) or extra <= 0:
         return obstacles
-    centroids = np.array([p.mean(axis=0) for p in obstacles.polygons()])
+    starts = obstacles.offsets[:-1]
+    centroids = (np.add.reduceat(obstacles.vertices, starts, axis=0)
+                 / np.diff(obstacles.offsets)[:, None])
     return obstacles.elongated(corridor.heading_at(corridor.to_sl(centroids)[:, 0]), extra)
 
 

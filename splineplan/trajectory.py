@@ -41,10 +41,11 @@ Steps, and the choices beyond the paper:
    along it; its distance to each nearby obstacle polygon is exact (culled by bounding
    box); on the road its corners and long-side midpoints keep the margin from the road
    edges (the corridor is extended past its ends), and so do the edges' vertices that
-   point into the road, which can meet the footprint's sides between those points. Curvature above ``1 / min_turn_radius``
-   is infeasible. A curve that starts infeasible is not refused outright: a move is then
-   kept if no feasible sample becomes infeasible and the worst violation of the changed
-   part does not grow (exactly "the new curve is feasible" when the start is feasible).
+   point into the road, which can meet the footprint's sides between those points.
+   Curvature above ``1 / min_turn_radius`` is infeasible. A curve that starts infeasible
+   is not refused outright: a move is then kept if no feasible sample becomes infeasible
+   and the worst violation of the changed part does not grow (exactly "the new curve is
+   feasible" when the start is feasible).
    The result reports ``feasible`` honestly.
 6. Single moves can sharpen a bend for a while, so the curve returned is the one with the
    highest minimum allowed speed seen after any round: it never decreases.
