@@ -49,6 +49,10 @@ class Corridor:
         that lead on along the route, before a junction), :data:`UNBOUNDED` where the
         whole road will do; ``None``: nowhere bounded. The footprint keeps to ``left``
         and ``right``.
+    edge_ends
+        Station ``(len(edges),)`` [m] at which each edge's own stretch ends: from there to
+        the next edge's start the corridor crosses a junction (empty: unknown, no
+        junctions).
     """
 
     reference: FloatArray
@@ -60,6 +64,7 @@ class Corridor:
     offset: float = 0.0
     keep_left: FloatArray | None = None
     keep_right: FloatArray | None = None
+    edge_ends: FloatArray = field(default_factory=lambda: np.zeros(0))
     _tree: cKDTree = field(init=False, repr=False)
     _heading: FloatArray = field(init=False, repr=False)
     _cos: FloatArray = field(init=False, repr=False)
@@ -75,12 +80,14 @@ class Corridor:
             )
         if len(self.edges) != len(self.edge_starts):
             raise GeometryError("corridor needs one start station per edge")
+        if len(self.edge_ends) not in (0, len(self.edges)):
+            raise GeometryError("corridor needs one end station per edge, or none")
         keeps = (self.keep_left, self.keep_right)
         if (keeps[0] is None) != (keeps[1] is None) or any(
                 k is not None and k.shape != self.s.shape for k in keeps):
             raise GeometryError("corridor needs both keep offsets, one per station, or none")
         for name in ("reference", "s", "left", "right", "edge_starts", "keep_left",
-                     "keep_right"):
+                     "keep_right", "edge_ends"):
             if getattr(self, name) is not None:
                 getattr(self, name).setflags(write=False)
         d = np.diff(self.reference, axis=0)
@@ -242,6 +249,16 @@ class Corridor:
         i = int(np.searchsorted(self.edge_starts, s, side="right")) - 1
         return self.edges[max(i, 0)]
 
+    def junction_at(self, s: float) -> tuple[str, str] | None:
+        """The route edges ``(from, to)`` whose junction holds station ``s`` [m] (between
+        the end of one edge's own stretch and the start of the next), else ``None``."""
+        if len(self.edge_ends) == 0:
+            return None
+        i = int(np.searchsorted(self.edge_starts, s, side="right")) - 1
+        if i < 0 or i + 1 >= len(self.edges) or s <= self.edge_ends[i]:
+            return None
+        return self.edges[i], self.edges[i + 1]
+
     def slice(self, s0: float, s1: float) -> Corridor:
         """Sub-corridor between stations ``s0`` and ``s1`` [m], stations restarting at 0."""
         s0, s1 = max(0.0, float(s0)), min(self.length, float(s1))
@@ -253,12 +270,14 @@ class Corridor:
         r, lft = self.bounds_at(ss)
         keep = self.edge_starts < s1
         starts = np.maximum(self.edge_starts[keep] - s0, 0.0)
+        ends = self.edge_ends[keep] - s0 if len(self.edge_ends) else self.edge_ends
         edges = tuple(e for e, k in zip(self.edges, keep, strict=True) if k)
         if len(starts) > 1:  # drop edges that ended before s0
             last_before = np.searchsorted(starts, 0.0, side="right") - 1
             starts, edges = starts[last_before:], edges[last_before:]
+            ends = ends[last_before:] if len(ends) else ends
         kr, kl = ((None, None) if self.keep_left is None else self.keep_at(ss))
-        return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr)
+        return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr, ends)
 
     def segments(self, length: float, overlap: float = 0.0) -> list[Corridor]:
         """The corridor cut into pieces of at most ``length`` [m] (the last may be shorter).

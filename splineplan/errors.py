@@ -48,12 +48,23 @@ class RoadBlockedError(SplineplanError):
         line that no path reaches.
     edge
         Id of the SUMO edge at that station, where the corridor knows it (else ``None``).
+    junction
+        The route edges ``(from, to)`` when the station lies in the junction between them:
+        then the turn onto ``to`` is what is closed (else ``None``).
     """
 
-    def __init__(self, message: str, *, station: float, edge: str | None = None) -> None:
+    def __init__(self, message: str, *, station: float, edge: str | None = None,
+                 junction: tuple[str, str] | None = None) -> None:
         super().__init__(message)
         self.station = station
         self.edge = edge
+        self.junction = junction
+
+    @property
+    def closed_edge(self) -> str | None:
+        """The edge a new road selection should avoid: the one entered through the closed
+        junction, else the closed edge itself."""
+        return self.junction[1] if self.junction is not None else self.edge
 
 
 class TrajectoryError(SplineplanError):

@@ -6,7 +6,8 @@ A *plan folder* holds
     ``{"format": "splineplan.plan", "version": 1, ...}`` with
 
     - ``corridor``: ``reference`` ``(n, 2)``, ``s``, ``left``, ``right`` ``(n,)`` [m],
-      ``edges``, ``edge_starts``, ``offset`` (the fields of :class:`~splineplan.corridor.Corridor`);
+      ``edges``, ``edge_starts``, ``edge_ends``, ``offset`` (the fields of
+      :class:`~splineplan.corridor.Corridor`);
     - ``obstacles``: ``ids`` and ``polygons``, a list of ``(k, 2)`` vertex lists [m];
     - ``roadmaps``: one object per road segment with the fields of
       :class:`~splineplan.roadmap.Roadmap` (arrays as nested lists, ``params`` as an object);
@@ -175,6 +176,7 @@ def corridor_to_dict(corridor: Corridor) -> dict[str, Any]:
         "right": _plain(corridor.right),
         "edges": list(corridor.edges),
         "edge_starts": _plain(corridor.edge_starts),
+        "edge_ends": _plain(corridor.edge_ends),
         "offset": float(corridor.offset),
     }
 
@@ -279,6 +281,7 @@ def corridor_from_dict(d: Mapping[str, Any]) -> Corridor:
         tuple(d.get("edges", ())),
         np.asarray(d.get("edge_starts", []), dtype=float).reshape(-1),
         float(d.get("offset", 0.0)),
+        edge_ends=np.asarray(d.get("edge_ends", []), dtype=float).reshape(-1),
     )
 
 

@@ -420,9 +420,10 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     :data:`APPROACH_LENGTH` metres of each edge but the first, the keep offsets hold the
     vehicle's centre to the lanes that connect to the next route edge (SUMO maps a vehicle
     into the junction, and its signals and right of way hold, only from those). The
-    reference line runs midway between the two boundaries. Junction stretches count towards the
-    edge before them in ``edge_at``. The corridor covers the whole first edge (also when
-    the route starts at ``start_pos > 0``).
+    reference line runs midway between the two boundaries. Junction stretches count
+    towards the edge before them in ``edge_at``; ``edge_ends`` and ``junction_at`` tell
+    them apart. The corridor covers the whole first edge (also when the route starts at
+    ``start_pos > 0``).
 
     Parameters
     ----------
@@ -489,8 +490,11 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     starts_s = probe.to_sl(np.array([pieces[k][0][0] for k in starts]))[:, 0]
     starts_s[0] = 0.0
     starts_s = np.maximum.accumulate(np.clip(starts_s, 0.0, probe.length))
+    # each edge's own stretch ends where its band's midline ends (a junction follows)
+    ends_s = probe.to_sl(np.array([pieces[k][0][-1] for k in starts]))[:, 0]
+    ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
-                    keep_left, keep_right)
+                    keep_left, keep_right, ends_s)
 
 
 #: Narrowest drivable width [m] a route corridor keeps around its reference line, where

@@ -113,19 +113,28 @@ def plan(
     Raises
     ------
     NoRouteError
-        No road route avoids the closed edges.
+        No road route from the origin to the destination.
     RoadBlockedError
-        Level 2 found the road closed on the origin edge itself (no way around it), or
-        after ``max_reroutes`` re-routes.
+        Level 2 found the road closed on the origin or the destination edge itself (no way
+        around it), or no route avoids the closed edges, or it was still closed after
+        ``max_reroutes`` re-routes. Where level 2 finds a junction closed (a turn too sharp
+        for the vehicle, or obstacles in it), the edge entered through it is avoided.
     """
     obstacles = obstacles if obstacles is not None else Obstacles.empty()
     avoided = list(avoid)
     blocked: list[str] = []
     t_route = t_roadmap = t_traj = 0.0
+    last: RoadBlockedError | None = None
     while True:
         t0 = time.perf_counter()
-        route = _forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                               avoid=avoided, start_pos=start_pos)
+        try:
+            route = _forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                                   avoid=avoided, start_pos=start_pos)
+        except NoRouteError as err:
+            if last is None:
+                raise
+            raise RoadBlockedError(f"{last}; no other route: {err}", station=last.station,
+                                   edge=last.edge, junction=last.junction) from err
         corridor = route_corridor(network, route, vclass=vclass)
         t_route += time.perf_counter() - t0
         xy = (corridor.to_xy(start_pos, 0.0) if start_xy is None
@@ -137,11 +146,12 @@ def plan(
                                    roadmap_params=roadmap_params, params=trajectory_params,
                                    start_speed=start_speed, end_speed=end_speed)
         except RoadBlockedError as err:
-            edge = err.edge
-            if edge is None or edge == from_edge or edge in avoided or \
+            edge = err.closed_edge
+            if edge is None or edge in (from_edge, to_edge) or edge in avoided or \
                     len(blocked) >= max_reroutes:
                 raise
             log.info("edge %s closed at station %.1f m: re-routing", edge, err.station)
+            last = err
             blocked.append(edge)
             avoided.append(edge)
             continue

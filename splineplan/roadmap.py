@@ -763,7 +763,10 @@ def _search(
 def _raise_blocked(corridor: Corridor, stations: FloatArray, line: int) -> None:
     s = float(stations[line])
     edge = corridor.edge_at(s)
-    where = f" on edge {edge!r}" if edge is not None else ""
+    junction = corridor.junction_at(s)
+    where = (f" in the junction from edge {junction[0]!r} onto {junction[1]!r}" if junction
+             else f" on edge {edge!r}" if edge is not None else "")
     raise RoadBlockedError(
         f"road blocked at station {corridor.offset + s:.1f} m{where}: "
-        f"no passage for the vehicle", station=corridor.offset + s, edge=edge)
+        f"no passage for the vehicle", station=corridor.offset + s, edge=edge,
+        junction=junction)

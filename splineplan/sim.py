@@ -1015,7 +1015,9 @@ class _Run:
             blocked = err
             if blocked.edge is None:
                 blocked = RoadBlockedError(str(err), station=err.station,
-                                           edge=self.corridor.edge_at(float(err.station)))
+                                           edge=self.corridor.edge_at(float(err.station)),
+                                           junction=self.corridor.junction_at(
+                                               float(err.station)))
             blocked.station_on_route = float(blocked.station)  # type: ignore[attr-defined]
             return False, blocked
         except (TrajectoryError, GeometryError) as err:
@@ -1266,7 +1268,7 @@ class _Run:
 
         ego = self.sc.ego
         assert self.corridor is not None
-        blocked = err.edge
+        blocked = err.closed_edge
         here = self.corridor.edge_at(self.station)
         if blocked is None or blocked == here or blocked in self.avoid:
             return False, err

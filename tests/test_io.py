@@ -83,3 +83,18 @@ def test_driven_path_without_curvature(tmp_path: Path) -> None:
     back = read_trajectory_csv(tmp_path / "trajectory.csv")
     np.testing.assert_allclose(back.curvature, 1.0 / r, rtol=2e-3)
     np.testing.assert_allclose(back.s[-1], r * 1.0, rtol=1e-3)
+
+
+def test_route_corridor_round_trip_keeps_edges_and_junctions() -> None:
+    from splineplan.io import corridor_from_dict, corridor_to_dict
+    from splineplan.network import load_network, route_corridor
+    from splineplan.route import shortest_route
+
+    net = load_network(ROOT / "sumo_nets" / "grid.net.xml")
+    cor = route_corridor(net, shortest_route(net, "A1B1", "D1D0"))
+    back = corridor_from_dict(json.loads(json.dumps(corridor_to_dict(cor))))
+    assert back.edges == cor.edges
+    np.testing.assert_array_equal(back.edge_starts, cor.edge_starts)
+    np.testing.assert_array_equal(back.edge_ends, cor.edge_ends)
+    mid = (cor.edge_ends[0] + cor.edge_starts[1]) / 2.0
+    assert back.junction_at(mid) == cor.junction_at(mid) == cor.edges[:2]

@@ -159,6 +159,29 @@ def test_corridor_city() -> None:
     assert wp == pytest.approx(3.2, abs=1e-6) and wb == pytest.approx(6.4, abs=1e-6)
 
 
+@pytest.mark.parametrize(("start", "goal"), [("A1B1", "D1D0"), ("B0C0", "C0C1")])
+def test_corridor_knows_its_junctions(start: str, goal: str) -> None:
+    """Each edge's own stretch is as long as its lanes (sumolib), and the stations
+    between its end and the next edge's start lie in that junction's outline."""
+    path = NETS / "grid.net.xml"
+    net, sn = load_network(path), sumolib.net.readNet(str(path))
+    cor = route_corridor(net, shortest_route(net, start, goal))
+    assert len(cor.edge_ends) == len(cor.edges)
+    window = cor.slice(100.0, cor.length)
+    for i, edge in enumerate(cor.edges):
+        start_s, end_s = cor.edge_starts[i], cor.edge_ends[i]
+        assert end_s - start_s == pytest.approx(sn.getEdge(edge).getLength(), abs=1.0)
+        assert cor.junction_at((start_s + end_s) / 2.0) is None
+        if i + 1 == len(cor.edges):
+            continue
+        mid = (end_s + cor.edge_starts[i + 1]) / 2.0
+        assert cor.junction_at(mid) == (edge, cor.edges[i + 1])
+        outline = Polygon(sn.getEdge(edge).getToNode().getShape())
+        assert outline.contains(Point(cor.to_xy(mid, 0.0)))
+        if mid > 100.0:  # a slice keeps them
+            assert window.junction_at(mid - 100.0) == (edge, cor.edges[i + 1])
+
+
 @pytest.mark.parametrize(("start", "goal"), GRID_TURNS + GRID_CORNERS)
 def test_corridor_through_junctions_is_paved_and_wide(start: str, goal: str) -> None:
     """Through a junction the corridor spans from the allowed lanes of one edge to those

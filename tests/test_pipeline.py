@@ -13,7 +13,7 @@ import sumolib
 from conftest import GRID_TURNS
 
 from splineplan.cli import main
-from splineplan.network import load_network, read_obstacles
+from splineplan.network import load_network, read_obstacles, route_corridor
 from splineplan.pipeline import plan
 from splineplan.route import shortest_route
 from splineplan.trajectory import TrajectoryParams
@@ -55,6 +55,31 @@ def test_plan_reroutes_around_a_road_closed_by_stopped_cars(grid) -> None:
     assert result.route == shortest_route(grid, "A1B1", "C1D1", avoid=["B1C1"])
     # the new trajectory keeps clear of the stopped cars
     assert float(np.min(cars.distance(result.trajectory.xy))) > 1.0
+
+
+def test_plan_avoids_the_edge_entered_through_a_closed_junction(grid) -> None:
+    """An obstacle inside junction C1 (its outline shrunk by 1.5 m): where level 2 finds the
+    road closed within the junction, the edge it leads onto is avoided (not the edge
+    before it), and the new route keeps clear of the junction."""
+    from shapely.geometry import Polygon
+
+    from splineplan.errors import RoadBlockedError
+    from splineplan.obstacles import Obstacles
+    from splineplan.roadmap import RoadmapParams, plan_roadmap
+
+    sn = sumolib.net.readNet(str(NETS / "grid.net.xml"))
+    inner = Polygon(sn.getNode("C1").getShape()).buffer(-1.5, join_style=2)
+    block = Obstacles.from_polygons([np.asarray(inner.exterior.coords)])
+    cor = route_corridor(grid, shortest_route(grid, "C0C1", "C1D1"))
+    rp = RoadmapParams()
+    with pytest.raises(RoadBlockedError) as info:
+        plan_roadmap(cor, block, cor.to_xy(10.0, 0.0), rp)
+    assert info.value.junction == ("C0C1", "C1D1") and info.value.closed_edge == "C1D1"
+    assert "junction" in str(info.value)
+    result = plan(grid, "A1B1", "D1D0", block)
+    assert "C1D1" in result.blocked
+    assert not {e for e in result.route.edges if "C1" in (e[:2], e[2:])}
+    assert float(np.min(block.distance(result.trajectory.xy))) > 3.0
 
 
 def test_read_obstacles_puts_stopped_cars_front_bumper_at_end_pos(grid) -> None:
