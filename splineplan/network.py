@@ -502,6 +502,11 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
 MIN_CORRIDOR_WIDTH = 3.0
 
 
+#: Distance [m] from the line of a piece's end within which the next piece's points behind
+#: that end count as an overlap (see :func:`_trim_overlaps`).
+TRIM_LATERAL = 5.0
+
+
 def _trim_overlaps(
     pieces: list[tuple[FloatArray, FloatArray, FloatArray]], starts: list[int],
 ) -> tuple[list[tuple[FloatArray, FloatArray, FloatArray]], list[int]]:
@@ -509,9 +514,11 @@ def _trim_overlaps(
 
     Some networks draw consecutive edges (and the junction lane between them) overlapping:
     the next lane starts metres behind the end of the previous one. Joined as they are,
-    the reference line would run backwards there. Points behind the previous piece's end
-    (across the normal at its last point) are dropped, a junction piece with fewer than two
-    points left entirely; an edge's own piece keeps at least its last two points.
+    the reference line would run backwards there. A piece's points behind the previous
+    piece's end (across the normal at its last point) and within :data:`TRIM_LATERAL` of
+    its line are dropped, a junction piece with fewer than two points left entirely; an
+    edge's own piece keeps at least its last two points. Points behind but farther to the
+    side stay: there the road turns back (a hairpin junction), it does not overlap.
     """
     own = set(starts)
     out: list[tuple[FloatArray, FloatArray, FloatArray]] = []
@@ -521,7 +528,11 @@ def _trim_overlaps(
             prev = out[-1][0]
             end, d = prev[-1], prev[-1] - prev[-2]
             d = d / max(float(np.hypot(*d)), 1e-12)
-            ahead = (ref - end) @ d > -0.05
+            # behind the end and beside the previous piece: the overlap; far to the side,
+            # a piece that turns back (a hairpin) and keeps its points
+            rel = ref - end
+            ahead = (rel @ d > -0.05) | (np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0])
+                                         > TRIM_LATERAL)
             if ahead.sum() < 2:
                 if k not in own:
                     continue

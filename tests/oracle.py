@@ -10,6 +10,7 @@ components, bisecting over the distinct clearance values).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import shapely
@@ -82,10 +83,10 @@ def best_clearance(
     return OracleResult(float(levels[lo]), clearance, (x0, y0), step)
 
 
-def paved_area(net_path: str) -> shapely.Geometry:
+def paved_area(net_path: str, within: Any = None) -> shapely.Geometry:
     """The paved area of a SUMO network by sumolib and shapely alone: every lane (normal
     and internal) as a band of its width around its centre line, and every junction
-    outline."""
+    outline (only those meeting the geometry ``within``, where given)."""
     import sumolib
     from shapely.geometry import LineString
     from shapely.ops import unary_union
@@ -95,4 +96,44 @@ def paved_area(net_path: str) -> shapely.Geometry:
              for e in snet.getEdges(withInternal=True) for ln in e.getLanes()
              if len(ln.getShape()) >= 2]
     parts += [Polygon(j.getShape()) for j in snet.getNodes() if len(j.getShape()) >= 3]
+    if within is not None:
+        parts = [p for p in parts if p.intersects(within)]
     return unary_union([p for p in parts if p.is_valid])
+
+
+def corridor_excess(corridor: Any, paved: shapely.Geometry, *, step: float = 1.0,
+                    gap: float = 0.3) -> tuple[np.ndarray, np.ndarray]:
+    """How far [m] a corridor reaches beyond the paved area, station by station.
+
+    At stations every ``step`` metres, the corridor's normal is cut with the paved area;
+    the paved stretch holding the corridor's middle (stretches less than ``gap`` apart
+    joined: neighbouring lanes drawn a few centimetres apart) is compared with the
+    corridor's bounds there. ``inf`` where the middle is not paved. Unlike the area of the
+    corridor's outline outside the pavement, this does not count the ground between the
+    two legs of a hairpin, which the outline encloses. Returns the stations and excesses.
+    """
+    from shapely.geometry import LineString, Point
+
+    shapely.prepare(paved)
+    stations = np.arange(step / 2.0, corridor.length, step)
+    out = np.empty(len(stations))
+    right, left = corridor.bounds_at(stations)
+    for k, (s, r, lft) in enumerate(zip(stations, right, left, strict=True)):
+        lo, hi = float(r) - 4.0, float(lft) + 4.0
+        line = LineString([corridor.to_xy(s, lo), corridor.to_xy(s, hi)])
+        cut = line.intersection(paved)
+        spans = sorted(
+            sorted((lo + line.project(Point(g.coords[0])), lo + line.project(Point(g.coords[-1]))))
+            for g in getattr(cut, "geoms", [cut])
+            if not g.is_empty and g.geom_type == "LineString")
+        merged: list[list[float]] = []
+        for a, b in spans:
+            if merged and a - merged[-1][1] < gap:
+                merged[-1][1] = max(merged[-1][1], b)
+            else:
+                merged.append([a, b])
+        mid = (float(r) + float(lft)) / 2.0
+        hold = [m for m in merged if m[0] - 1e-6 <= mid <= m[1] + 1e-6]
+        out[k] = (max(float(lft) - hold[0][1], hold[0][0] - float(r), 0.0) if hold
+                  else np.inf)
+    return stations, out

@@ -8,10 +8,15 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import GRID_CORNERS, GRID_TURNS, NETS
-from oracle import paved_area
+from oracle import corridor_excess, paved_area
 from shapely.geometry import Point, Polygon
 
-from splineplan.errors import NetworkError, UnknownEdgeError, VehicleClassError
+from splineplan.errors import (
+    NetworkError,
+    SplineplanError,
+    UnknownEdgeError,
+    VehicleClassError,
+)
 from splineplan.network import load_network, route_corridor
 from splineplan.route import shortest_route
 
@@ -157,6 +162,52 @@ def test_corridor_city() -> None:
     wp = np.subtract(*cor_p.bounds_at(s_p)[::-1])
     wb = np.subtract(*cor_b.bounds_at(s_b)[::-1])
     assert wp == pytest.approx(3.2, abs=1e-6) and wb == pytest.approx(6.4, abs=1e-6)
+
+
+def _excess_on_edges_and_junctions(net_path: Path, start: str, goal: str,
+                                   paved: object = None) -> tuple[np.ndarray, np.ndarray]:
+    net = load_network(net_path)
+    cor = route_corridor(net, shortest_route(net, start, goal, turnarounds=False))
+    if paved is None:  # the paved area near the corridor
+        paved = paved_area(net_path, within=Polygon(cor.polygon()).buffer(10.0))
+    stations, excess = corridor_excess(cor, paved)
+    junction = np.array([cor.junction_at(s) is not None for s in stations])
+    return excess[~junction], excess[junction]
+
+
+@pytest.mark.parametrize("name", ["grid.net.xml", "city.net.xml"])
+def test_corridor_stays_on_the_pavement_station_by_station(name: str) -> None:
+    """On seeded random routes, across the road at every metre, the corridor reaches
+    beyond sumolib's paved area by at most 5 cm on the edges (their lanes' band) and
+    0.4 m in junctions (kerb curves for SUMO's junction outlines)."""
+    import random
+
+    path = NETS / name
+    net, paved = load_network(path), paved_area(path)
+    rng = random.Random(3)
+    usable = [e for e in net.edge_ids if net.allows(e, "passenger")]
+    done = 0
+    while done < 4:
+        a, b = rng.choice(usable), rng.choice(usable)
+        try:
+            if shortest_route(net, a, b, turnarounds=False).length < 300.0:
+                continue
+        except SplineplanError:
+            continue
+        on_edges, in_junctions = _excess_on_edges_and_junctions(path, a, b, paved)
+        assert on_edges.max() <= 0.05, (a, b, on_edges.max())
+        assert in_junctions.max() <= 0.4, (a, b, in_junctions.max())
+        done += 1
+
+
+def test_corridor_follows_an_edge_after_a_hairpin_junction(monaco_net: Path) -> None:
+    """Monaco: 1253#3 turns back onto 1135#0 through a hairpin junction. The corridor
+    once cut a 5 m chord across 1135#0 there (its points behind the junction's end were
+    dropped as an overlap); now it follows the lane."""
+    on_edges, in_junctions = _excess_on_edges_and_junctions(monaco_net, "-2225", "-1293#3")
+    excess = np.concatenate((on_edges, in_junctions))
+    assert np.mean(excess > 0.05) < 0.01
+    assert on_edges.max() < 0.5
 
 
 @pytest.mark.parametrize(("start", "goal"), [("A1B1", "D1D0"), ("B0C0", "C0C1")])
