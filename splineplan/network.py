@@ -516,9 +516,10 @@ def _trim_overlaps(
     the next lane starts metres behind the end of the previous one. Joined as they are,
     the reference line would run backwards there. A piece's points behind the previous
     piece's end (across the normal at its last point) and within :data:`TRIM_LATERAL` of
-    its line are dropped, a junction piece with fewer than two points left entirely; an
-    edge's own piece keeps at least its last two points. Points behind but farther to the
-    side stay: there the road turns back (a hairpin junction), it does not overlap.
+    its line are dropped, and the piece starts where it crosses that normal; a junction
+    piece with fewer than two points left is dropped entirely; an edge's own piece keeps at
+    least its last two points. Points behind but farther to the side stay: there the road
+    turns back (a hairpin junction), it does not overlap.
     """
     own = set(starts)
     out: list[tuple[FloatArray, FloatArray, FloatArray]] = []
@@ -531,13 +532,23 @@ def _trim_overlaps(
             # behind the end and beside the previous piece: the overlap; far to the side,
             # a piece that turns back (a hairpin) and keeps its points
             rel = ref - end
-            ahead = (rel @ d > -0.05) | (np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0])
-                                         > TRIM_LATERAL)
+            along = rel @ d
+            ahead = (along > -0.05) | (np.abs(rel[:, 0] * d[1] - rel[:, 1] * d[0])
+                                       > TRIM_LATERAL)
             if ahead.sum() < 2:
                 if k not in own:
                     continue
                 ahead[-2:] = True
-            ref, lo, ro = ref[ahead], lo[ahead], ro[ahead]
+            j = int(np.argmax(ahead))
+            if j > 0 and along[j] > -0.05 > along[j - 1]:
+                # the piece starts where it crosses the previous end's normal, so that the
+                # corridor has no gap to bridge between the two
+                f = (-0.05 - along[j - 1]) / (along[j] - along[j - 1])
+                ref = np.vstack((ref[j - 1] + f * (ref[j] - ref[j - 1]), ref[ahead]))
+                lo = np.concatenate(([lo[j - 1] + f * (lo[j] - lo[j - 1])], lo[ahead]))
+                ro = np.concatenate(([ro[j - 1] + f * (ro[j] - ro[j - 1])], ro[ahead]))
+            else:
+                ref, lo, ro = ref[ahead], lo[ahead], ro[ahead]
         if k in own:
             new_starts.append(len(out))
         out.append((ref, lo, ro))

@@ -210,6 +210,18 @@ def test_corridor_follows_an_edge_after_a_hairpin_junction(monaco_net: Path) -> 
     assert on_edges.max() < 0.5
 
 
+def test_corridor_follows_a_road_split(monaco_net: Path) -> None:
+    """Monaco 1729#3 (three lanes) -> 1729#4 (one lane): the next edge's shape starts 7 m
+    behind the end of the last, where the roads split. The corridor once bridged the
+    trimmed gap by interpolation, across the unpaved ground between the two roads (its
+    middle unpaved at 6 stations); now the next edge starts where its lane crosses the
+    end of the last."""
+    on_edges, in_junctions = _excess_on_edges_and_junctions(monaco_net, "-756#1", "1729#4")
+    excess = np.concatenate((on_edges, in_junctions))
+    assert np.isinf(excess).sum() <= 1
+    assert np.mean(excess > 0.05) < 0.012
+
+
 @pytest.mark.parametrize(("start", "goal"), [("A1B1", "D1D0"), ("B0C0", "C0C1")])
 def test_corridor_knows_its_junctions(start: str, goal: str) -> None:
     """Each edge's own stretch is as long as its lanes (sumolib), and the stations
