@@ -439,6 +439,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         raise GeometryError("route has no edges")
     pieces: list[tuple[FloatArray, FloatArray, FloatArray]] = []
     keep: list[tuple[FloatArray, FloatArray, FloatArray]] = []  # lanes to keep to
+    keep_edge: list[int] = []  # the route edge of each
     starts: list[int] = []  # index into pieces where each edge's own stretch begins
     for i, eid in enumerate(edges):
         lanes = [ln for ln in network.lanes_of(eid) if ln.allows(cls)]
@@ -454,6 +455,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         pieces.append(_band(lanes[0].shape, lanes[0].width, lanes[-1].shape, lanes[-1].width))
         if i > 0 and (src[0] is not lanes[0] or src[-1] is not lanes[-1]):
             keep.append(_approach_band(src, APPROACH_LENGTH))
+            keep_edge.append(i)
         if i + 1 < len(edges):
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
@@ -480,18 +482,21 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
                                  REFERENCE_SMOOTHING)
     probe = Corridor.from_reference(reference, np.full(len(reference), 1e3),
                                     np.full(len(reference), -1e3))
-    left_off, right_off = _union_offsets(probe, pieces)
+    windows = _piece_windows(probe, pieces)
+    left_off, right_off = _union_offsets(probe, pieces, windows)
     left_off, right_off = _limit_to_curvature(probe, left_off, right_off)
     keep_left = keep_right = None
     if keep:
-        keep_left, keep_right = _union_offsets(probe, keep, fill=False)
+        keep_left, keep_right = _union_offsets(probe, keep,
+                                               [windows[starts[i]] for i in keep_edge],
+                                               fill=False)
         keep_left = np.minimum(keep_left, left_off)
         keep_right = np.maximum(keep_right, right_off)
-    starts_s = probe.to_sl(np.array([pieces[k][0][0] for k in starts]))[:, 0]
+    starts_s = np.array([_project(probe, pieces[k][0][:1], windows[k])[0, 0] for k in starts])
     starts_s[0] = 0.0
     starts_s = np.maximum.accumulate(np.clip(starts_s, 0.0, probe.length))
     # each edge's own stretch ends where its band's midline ends (a junction follows)
-    ends_s = probe.to_sl(np.array([pieces[k][0][-1] for k in starts]))[:, 0]
+    ends_s = np.array([_project(probe, pieces[k][0][-1:], windows[k])[0, 0] for k in starts])
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
                     keep_left, keep_right, ends_s)
@@ -555,25 +560,68 @@ def _trim_overlaps(
     return out, new_starts
 
 
+#: Stations [m] around a piece's place on the reference line within which its points are
+#: projected (see :func:`_piece_windows`).
+WINDOW_SLACK = 20.0
+
+
+def _piece_windows(probe: Corridor, pieces: list[tuple[FloatArray, FloatArray, FloatArray]]
+                   ) -> list[tuple[float, float]]:
+    """Per piece, the stations ``(lo, hi)`` [m] of the reference line it was joined into.
+
+    The reference runs through the pieces' midlines in order, so each piece's place on it
+    follows from the midlines' lengths (scaled to the reference's length, which smoothing
+    shortens at corners), give or take :data:`WINDOW_SLACK`. A route that passes the same
+    place twice (a loop, a road and its return beside it) projects each piece onto its own
+    pass, not onto the nearest.
+    """
+    spans = []
+    at = 0.0
+    prev_end: FloatArray | None = None
+    for ref, _, _ in pieces:
+        if prev_end is not None:
+            at += float(np.hypot(*(ref[0] - prev_end)))
+        length = float(polyline_stations(dedupe_polyline(ref))[-1]) if len(ref) > 1 else 0.0
+        spans.append((at, at + length))
+        at += length
+        prev_end = ref[-1]
+    scale = probe.length / max(at, 1e-9)
+    return [(scale * a - WINDOW_SLACK, scale * b + WINDOW_SLACK) for a, b in spans]
+
+
+def _project(probe: Corridor, points: FloatArray, window: tuple[float, float]) -> FloatArray:
+    """Stations and offsets ``(n, 2)`` of points on the reference line, onto the part of it
+    within the station ``window`` where the nearest part lies outside."""
+    sl = probe.to_sl(points)
+    lo, hi = max(window[0], 0.0), min(window[1], probe.length)
+    if hi - lo < 1.0 or np.all((sl[:, 0] >= lo) & (sl[:, 0] <= hi)):
+        return sl
+    part = probe.slice(lo, hi)
+    out = part.to_sl(points)
+    out[:, 0] += part.offset
+    return out
+
+
 def _union_offsets(
-    probe: Corridor, pieces: list[tuple[FloatArray, FloatArray, FloatArray]], *,
-    fill: bool = True,
+    probe: Corridor, pieces: list[tuple[FloatArray, FloatArray, FloatArray]],
+    windows: list[tuple[float, float]], *, fill: bool = True,
 ) -> tuple[FloatArray, FloatArray]:
     """Left and right offsets ``(n,)`` [m] of the union of the pieces' bands.
 
-    Each piece covers the stations its midline projects onto; stations no piece covers
-    (a join without junction lanes) are interpolated between their neighbours, or with
-    ``fill=False`` left unbounded (:data:`~splineplan.corridor.UNBOUNDED`).
+    Each piece covers the stations its midline projects onto, within its window (see
+    :func:`_piece_windows`); stations no piece covers (a join without junction lanes) are
+    interpolated between their neighbours, or with ``fill=False`` left unbounded
+    (:data:`~splineplan.corridor.UNBOUNDED`).
     """
     n = len(probe.s)
     left = np.full(n, -np.inf)
     right = np.full(n, np.inf)
-    for ref0, lo0, ro0 in pieces:
+    for (ref0, lo0, ro0), window in zip(pieces, windows, strict=True):
         s0 = polyline_stations(ref0)  # densely, so that the lateral offsets follow the bends
         u = np.linspace(0.0, s0[-1], max(2, int(np.ceil(s0[-1] / 0.5)) + 1))
         ref = np.column_stack((np.interp(u, s0, ref0[:, 0]), np.interp(u, s0, ref0[:, 1])))
         lo, ro = np.interp(u, s0, lo0), np.interp(u, s0, ro0)
-        sl = probe.to_sl(ref)
+        sl = _project(probe, ref, window)
         s = np.maximum.accumulate(sl[:, 0])
         keep = np.concatenate(([True], np.diff(s) > 1e-6))
         s, lft, rgt = s[keep], (sl[:, 1] + lo)[keep], (sl[:, 1] + ro)[keep]

@@ -222,6 +222,22 @@ def test_corridor_follows_a_road_split(monaco_net: Path) -> None:
     assert np.mean(excess > 0.05) < 0.012
 
 
+def test_corridor_of_a_route_that_passes_a_place_twice(monaco_net: Path) -> None:
+    """Monaco 2951#5 -> 1520 runs out along 2951, round a loop (-2437, one 3.2 m lane) and
+    back along -2951 beside its way out. Projected onto the nearest part of the reference
+    line, bands of one pass landed on the other and widened -2437's stretch to 3.4 m,
+    beyond the pavement at 14 % of the route's stations; each piece now projects onto its
+    own part of the route."""
+    net = load_network(monaco_net)
+    cor = route_corridor(net, shortest_route(net, "2951#5", "1520", turnarounds=False))
+    i = cor.edges.index("-2437")
+    s = np.linspace(cor.edge_starts[i] + 5.0, cor.edge_ends[i] - 5.0, 50)
+    right, left = cor.bounds_at(s)
+    assert np.allclose(left - right, 3.2, atol=0.05)
+    on_edges, in_junctions = _excess_on_edges_and_junctions(monaco_net, "2951#5", "1520")
+    assert np.mean(np.concatenate((on_edges, in_junctions)) > 0.05) < 0.01
+
+
 @pytest.mark.parametrize(("start", "goal"), [("A1B1", "D1D0"), ("B0C0", "C0C1")])
 def test_corridor_knows_its_junctions(start: str, goal: str) -> None:
     """Each edge's own stretch is as long as its lanes (sumolib), and the stations
