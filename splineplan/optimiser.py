@@ -136,6 +136,12 @@ class _Curve:
         first, basis = _basis(u, knots, k, n)
         return cls(ctrl, pool_index, knots, k, u, first, basis)
 
+    def combine(self, values: FloatArray) -> FloatArray:
+        """The curve's blend ``(m,)`` at the samples of one value per control point ``(n,)``
+        (e.g. their stations: an estimate of the samples' stations)."""
+        cols = self.first + np.arange(self.k + 1)[:, None]
+        return np.asarray((self.basis[0] * values[cols]).sum(axis=0))
+
     def evaluate(self, ctrl: FloatArray | None = None) -> tuple[FloatArray, FloatArray,
                                                                   FloatArray]:
         """Positions, first and second parameter derivatives ``(m, 2)`` at the samples."""
@@ -171,12 +177,16 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
     counts = counts.copy()
     rounds = doubled = stall = 0
     n_pool = len(pool)
+    # the candidates' stations: blended by the basis, they estimate the samples' stations,
+    # which the footprint check refines (no nearest-point search per sample)
+    pool_s = checker.stations(pool)
     best: tuple[tuple[float, float], _Curve, int, int, tuple[FloatArray, ...]] | None = None
     while True:
         pool_idx = np.repeat(np.arange(n_pool), counts)
         curve = _Curve.build(pool[pool_idx], pool_idx, params.degree, params.sample_spacing)
         pos, d1, d2 = curve.evaluate()
-        slack, sc = checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]))
+        slack, sc = checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]),
+                                  curve.combine(pool_s[pool_idx]))
         kmax = float(np.abs(curvature_from_derivatives(d1, d2)).max())
         # violation: footprint [m] inside the margin, then curvature beyond the limit
         score = (max(-float(slack.min()), 0.0), max(kmax - params.kappa_max, 0.0))
@@ -218,12 +228,14 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
     curve, samples = best[1], best[4]
     pushes = 0
     if best[0][0] > 0:
-        curve, samples, pushes = _push(curve, samples, checker, params)
+        curve, samples, pushes = _push(curve, samples, checker, params,
+                                       pool_s[curve.pool_index])
     return curve, best[2] + pushes, best[3], samples
 
 
 def _push(curve: _Curve, samples: tuple[FloatArray, ...], checker: _Checker,
-          params: TrajectoryParams) -> tuple[_Curve, tuple[FloatArray, ...], int]:
+          params: TrajectoryParams, ctrl_s: FloatArray
+          ) -> tuple[_Curve, tuple[FloatArray, ...], int]:
     """The curve shifted sideways where its footprint comes within the margin of one road
     edge while the other edge leaves room (a lane's curve that cuts a corner a few
     centimetres too far): the control points that shape each such sample move along the
@@ -233,7 +245,8 @@ def _push(curve: _Curve, samples: tuple[FloatArray, ...], checker: _Checker,
     A round (else half of it) is kept only if it lowers the largest footprint violation, or
     the total at an equal largest, without raising the curve's largest curvature above
     the turning limit or its former value; at most ``repair_rounds`` rounds. Returns the
-    curve, its samples (as :func:`_refine`) and the rounds kept.
+    curve, its samples (as :func:`_refine`) and the rounds kept. ``ctrl_s``: the control
+    points' stations (a sideways push keeps them), which estimate the samples' stations.
     """
     pos, d1, d2, slack, sc = samples
 
@@ -276,7 +289,7 @@ def _push(curve: _Curve, samples: tuple[FloatArray, ...], checker: _Checker,
             cand = _Curve.build(curve.ctrl + scale * move, curve.pool_index, params.degree,
                                 params.sample_spacing)
             p2, e1, e2 = cand.evaluate()
-            s2, c2 = checker.slack(p2, np.arctan2(e1[:, 1], e1[:, 0]))
+            s2, c2 = checker.slack(p2, np.arctan2(e1[:, 1], e1[:, 0]), cand.combine(ctrl_s))
             new = score(s2)
             bend = float(np.abs(curvature_from_derivatives(e1, e2)).max())
             if new < best and bend <= max(bend_best, params.kappa_max) + 1e-12:
