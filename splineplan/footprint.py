@@ -5,9 +5,9 @@ oriented along it, keeps the safety margin from every obstacle polygon (exact
 rectangle-polygon distance, culled by bounding box) and from the road edges (its corners
 and long-side midpoints in the frames of the corridor's reference segments, and the road
 edges' inward vertices, which can come between those points, by exact rectangle-point
-distance). A module of its
-own because both the repair of the first curve and the optimiser's moves
-(:mod:`splineplan.optimiser`) and the final samples (:mod:`splineplan.trajectory`) use it.
+distance). A module of its own because both the repair of the first curve and the
+optimiser's moves (:mod:`splineplan.optimiser`) and the final samples
+(:mod:`splineplan.trajectory`) use it.
 """
 
 from __future__ import annotations

@@ -169,7 +169,8 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
     onto its control polygon, undoing the corner cut). At most ``repair_rounds`` rounds,
     and none after two rounds that did not improve on the best curve; the least violating
     curve is returned (footprint first, then curvature: the curvature is left to the
-    optimisation).
+    optimisation), pushed sideways off a road edge where it still comes too close
+    (:func:`_push`; its rounds count as repair rounds).
 
     Returns the curve, the rounds, the number of control points doubled and the curve's
     samples (positions, derivatives, footprint slack, stations) for the optimiser.
