@@ -21,7 +21,7 @@ log = logging.getLogger(__name__)
 def allowed_speed(kappa: ArrayLike, *, mu: float, g: float, s_max: float) -> FloatArray:
     """Equation (1): ``min(sqrt(mu g / |kappa|), s_max)`` [m/s] at curvatures ``kappa`` [1/m]."""
     k = np.abs(np.asarray(kappa, dtype=float))
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):  # straight: zero or denormal kappa
         v = np.sqrt(mu * g / k)
     return np.asarray(np.minimum(v, s_max))
 

@@ -14,6 +14,10 @@ from splineplan.speed import allowed_speed, speed_profile, times_from_profile
 def test_allowed_speed_equation_1() -> None:
     v = allowed_speed([0.0, 0.1, -0.1, 1.0], mu=0.7, g=9.81, s_max=13.89)
     np.testing.assert_allclose(v, [13.89, np.sqrt(68.67), np.sqrt(68.67), np.sqrt(6.867)])
+    # a denormal curvature (a straight curve's rounding) overflows mu g / kappa: s_max, no
+    # warning (hypothesis found a curve with kappa = -1.3e-308)
+    v = allowed_speed([-1.27512029e-308, 5e-324], mu=0.7, g=9.81, s_max=13.89)
+    np.testing.assert_array_equal(v, [13.89, 13.89])
 
 
 @settings(max_examples=40, deadline=None)
