@@ -6,6 +6,9 @@ the command-line tool can print it as one line.
 
 from __future__ import annotations
 
+import math
+from numbers import Real
+
 
 class SplineplanError(Exception):
     """Base class of every error raised by splineplan."""
@@ -77,3 +80,25 @@ class ScenarioError(SplineplanError):
 
 class SimulationError(SplineplanError):
     """SUMO failed to start, or the simulation could not go on."""
+
+
+def require_positive(name: str, value: object) -> None:
+    """Raise :class:`ParameterError` unless ``value`` is a finite number above 0."""
+    x = _finite(value)
+    if x is None or x <= 0:
+        raise ParameterError(f"{name} must be positive, got {value!r}")
+
+
+def require_non_negative(name: str, value: object) -> None:
+    """Raise :class:`ParameterError` unless ``value`` is a finite number, 0 or above."""
+    x = _finite(value)
+    if x is None or x < 0:
+        raise ParameterError(f"{name} must be >= 0, got {value!r}")
+
+
+def _finite(value: object) -> float | None:
+    """``value`` as a float if it is a finite number (Python's or numpy's ints and floats,
+    not bools, which are ints to Python), else ``None``."""
+    if isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value):
+        return float(value)
+    return None

@@ -492,11 +492,12 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
                                                fill=False)
         keep_left = np.minimum(keep_left, left_off)
         keep_right = np.maximum(keep_right, right_off)
-    starts_s = np.array([_project(probe, pieces[k][0][:1], windows[k])[0, 0] for k in starts])
+    own = [windows[k] for k in starts]
+    starts_s = _project_each(probe, np.array([pieces[k][0][0] for k in starts]), own)
     starts_s[0] = 0.0
     starts_s = np.maximum.accumulate(np.clip(starts_s, 0.0, probe.length))
     # each edge's own stretch ends where its band's midline ends (a junction follows)
-    ends_s = np.array([_project(probe, pieces[k][0][-1:], windows[k])[0, 0] for k in starts])
+    ends_s = _project_each(probe, np.array([pieces[k][0][-1] for k in starts]), own)
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
                     keep_left, keep_right, ends_s)
@@ -600,6 +601,17 @@ def _project(probe: Corridor, points: FloatArray, window: tuple[float, float]) -
     out = part.to_sl(points)
     out[:, 0] += part.offset
     return out
+
+
+def _project_each(probe: Corridor, points: FloatArray, windows: list[tuple[float, float]]
+                  ) -> FloatArray:
+    """Stations ``(n,)`` [m] of points, each within its own window (see :func:`_project`):
+    one query for all, again per point only where the nearest part lies outside."""
+    st = probe.to_sl(points)[:, 0]
+    for k, (lo, hi) in enumerate(windows):
+        if not max(lo, 0.0) <= st[k] <= min(hi, probe.length):
+            st[k] = _project(probe, points[k:k + 1], (lo, hi))[0, 0]
+    return st
 
 
 def _union_offsets(

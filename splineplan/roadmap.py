@@ -14,7 +14,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import REFERENCE_SPACING, Corridor
-from splineplan.errors import GeometryError, ParameterError, RoadBlockedError
+from splineplan.errors import (
+    GeometryError,
+    ParameterError,
+    RoadBlockedError,
+    require_non_negative,
+    require_positive,
+)
 from splineplan.geometry import FloatArray, polygon_edges, wrap_angle
 from splineplan.obstacles import Obstacles
 
@@ -53,19 +59,9 @@ class RoadmapParams:
     segment_length: float = 300.0
 
     def __post_init__(self) -> None:
-        for name in ("d", "wmax", "safety_margin", "vehicle_length", "vehicle_width",
-                     "segment_length"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int | float | np.floating):
-                raise ParameterError(f"RoadmapParams.{name} must be a number, got {value!r}")
         for name in ("d", "wmax", "vehicle_length", "vehicle_width", "segment_length"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ParameterError(f"RoadmapParams.{name} must be positive, got {value!r}")
-        if not (np.isfinite(self.safety_margin) and self.safety_margin >= 0):
-            raise ParameterError(
-                f"RoadmapParams.safety_margin must be >= 0, got {self.safety_margin!r}"
-            )
+            require_positive(f"RoadmapParams.{name}", getattr(self, name))
+        require_non_negative("RoadmapParams.safety_margin", self.safety_margin)
         if self.segment_length < 2 * self.d:
             raise ParameterError("RoadmapParams.segment_length must be at least 2 d")
 

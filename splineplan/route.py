@@ -137,7 +137,7 @@ def shortest_route(
                                f"the {name} edge '{network.edge_ids[i]}' is to be avoided")
 
     search = _search(network, graph, weight)
-    adjacency = search.adjacency if turnarounds else _forward(network, graph, search, vclass)
+    adjacency = search.adjacency if turnarounds else _forward(network, graph, search)
     # the landmark bounds hold on the graph without turnarounds too (it only loses arcs)
     path = dijkstra(adjacency, src, dst, blocked, search.potential(src, dst))
     if path is None:
@@ -235,7 +235,8 @@ class _Search:
     adjacency: list[list[tuple[int, float]]]
     from_landmark: FloatArray
     to_landmark: FloatArray
-    forward: dict[str, list[list[tuple[int, float]]]] = field(default_factory=dict)
+    # the adjacency without turnaround steps, once built (a list of one: frozen class)
+    forward: list[list[list[tuple[int, float]]]] = field(default_factory=list)
 
     def potential(self, source: int, target: int) -> list[float]:
         """Landmark lower bounds (ALT) of every vertex's cost to ``target``."""
@@ -270,16 +271,15 @@ def is_turnaround(network: RoadNetwork, from_edge: str, to_edge: str, vclass: st
     return bool(conns) and all(c.direction == "t" for c in conns)
 
 
-def _forward(network: RoadNetwork, graph: ClassGraph, search: _Search,
-             vclass: str) -> list[list[tuple[int, float]]]:
+def _forward(network: RoadNetwork, graph: ClassGraph, search: _Search
+             ) -> list[list[tuple[int, float]]]:
     """The search's arc lists without turnaround steps (built on first use, cached)."""
-    found = search.forward.get(vclass)
-    if found is None:
-        ids = network.edge_ids
-        found = [[(v, c) for v, c in arcs if not is_turnaround(network, ids[u], ids[v], vclass)]
-                 for u, arcs in enumerate(search.adjacency)]
-        search.forward[vclass] = found
-    return found
+    if not search.forward:
+        ids, vclass = network.edge_ids, graph.vclass
+        search.forward.append(
+            [[(v, c) for v, c in arcs if not is_turnaround(network, ids[u], ids[v], vclass)]
+             for u, arcs in enumerate(search.adjacency)])
+    return search.forward[0]
 
 
 def _arc_costs(network: RoadNetwork, graph: ClassGraph, weight: str) -> FloatArray:

@@ -30,14 +30,18 @@ Example::
 from __future__ import annotations
 
 import dataclasses
-import math
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from splineplan.errors import ParameterError, ScenarioError
+from splineplan.errors import (
+    ParameterError,
+    ScenarioError,
+    require_non_negative,
+    require_positive,
+)
 from splineplan.roadmap import RoadmapParams
 
 #: Keys of the ``[roadmap]`` section that come from the ``[ego]`` section instead.
@@ -88,11 +92,11 @@ class EgoSpec:
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
                 raise ParameterError(f"ego.{name} must be a non-empty string")
         for name in ("length", "width", "max_speed"):
-            _positive(f"ego.{name}", getattr(self, name))
+            require_positive(f"ego.{name}", getattr(self, name))
         for name in ("start_pos", "depart"):
-            _non_negative(f"ego.{name}", getattr(self, name))
+            require_non_negative(f"ego.{name}", getattr(self, name))
         if self.goal_pos is not None:
-            _non_negative("ego.goal_pos", self.goal_pos)
+            require_non_negative("ego.goal_pos", self.goal_pos)
         if not isinstance(self.start_lane, int) or self.start_lane < 0:
             raise ParameterError(f"ego.start_lane must be an integer >= 0, got {self.start_lane!r}")
 
@@ -140,8 +144,8 @@ class SimParams:
     def __post_init__(self) -> None:
         for name in ("duration", "step_length", "lookahead", "replan_distance",
                      "deviation_tolerance", "time_gap", "min_gap", "stopped_speed"):
-            _positive(f"sim.{name}", getattr(self, name))
-        _non_negative("sim.goal_margin", self.goal_margin)
+            require_positive(f"sim.{name}", getattr(self, name))
+        require_non_negative("sim.goal_margin", self.goal_margin)
         if not isinstance(self.seed, int):
             raise ParameterError(f"sim.seed must be an integer, got {self.seed!r}")
         if self.replan_distance >= self.lookahead:
@@ -322,16 +326,3 @@ def _is_float(annotation: Any) -> bool:
     text = annotation if isinstance(annotation, str) else getattr(annotation, "__name__", "")
     return "float" in str(text)
 
-
-def _positive(name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not (
-        math.isfinite(value) and value > 0
-    ):
-        raise ParameterError(f"{name} must be positive, got {value!r}")
-
-
-def _non_negative(name: str, value: Any) -> None:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not (
-        math.isfinite(value) and value >= 0
-    ):
-        raise ParameterError(f"{name} must be >= 0, got {value!r}")

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from splineplan.errors import ParameterError
+from splineplan.errors import ParameterError, require_non_negative, require_positive
 
 
 @dataclass(frozen=True)
@@ -90,21 +90,13 @@ class TrajectoryParams:
                                  f"got {self.degree!r}")
         for name in ("mu", "g", "s_max", "a_max", "b_max", "sample_spacing", "min_turn_radius",
                      "max_control_spacing"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float | np.floating | np.integer)
-                    and np.isfinite(value) and value > 0):
-                raise ParameterError(f"TrajectoryParams.{name} must be positive and finite, "
-                                     f"got {value!r}")
+            require_positive(f"TrajectoryParams.{name}", getattr(self, name))
         if not (isinstance(self.band_fraction, int | float | np.floating | np.integer)
                 and 0.0 <= self.band_fraction <= 1.0):
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
         for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "detour_rate"):
-            value = getattr(self, name)
-            if not (isinstance(value, int | float | np.floating | np.integer)
-                    and np.isfinite(value) and value >= 0):
-                raise ParameterError(f"TrajectoryParams.{name} must be >= 0 and finite, "
-                                     f"got {value!r}")
+            require_non_negative(f"TrajectoryParams.{name}", getattr(self, name))
         for name in ("max_iterations", "repair_rounds", "patience"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:

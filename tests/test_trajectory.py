@@ -400,6 +400,7 @@ def test_off_road_start() -> None:
     {"mu": 0.0}, {"mu": -1.0}, {"s_max": float("nan")}, {"a_max": 0.0}, {"b_max": -4.0},
     {"sample_spacing": 0.0}, {"min_turn_radius": float("inf")}, {"degree": 1},
     {"degree": 2.5}, {"max_iterations": -1}, {"g": 0.0}, {"patience": -1}, {"patience": 1.5},
+    {"mu": True}, {"s_max": "13"}, {"lead_in_time": -0.1}, {"detour_rate": float("nan")},
 ])
 def test_bad_params(kwargs: dict[str, float]) -> None:
     with pytest.raises(ParameterError):
