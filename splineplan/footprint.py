@@ -1,4 +1,4 @@
-"""The vehicle's footprint against obstacles and road edges, vectorised over curve samples.
+"""The vehicle's footprint against obstacles and road edges, at many curve samples at once.
 
 Level 3 checks each sample of a curve: the vehicle's rectangle, centred on the curve and
 oriented along it, keeps the safety margin from every obstacle polygon (exact
@@ -8,13 +8,19 @@ edges' inward vertices, which can come between those points, by exact rectangle-
 distance). A module of its own because both the repair of the first curve and the
 optimiser's moves (:mod:`splineplan.optimiser`) and the final samples
 (:mod:`splineplan.trajectory`) use it.
+
+The checks are loops over samples compiled with numba (cached on disk after the first
+run): level 3 calls them a few thousand times per route on tens to hundreds of samples,
+where array code spent most of its time in the overhead of small numpy calls.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
@@ -33,7 +39,7 @@ CORNER_BAND = 1.0
 
 @dataclass(frozen=True, eq=False)
 class _Checker:
-    """Footprint clearance of the vehicle at curve samples, vectorised.
+    """Footprint clearance of the vehicle at curve samples.
 
     The road check works in the frames of the reference line's segments (cached once:
     origins, stations, unit directions, boundary offsets); it needs an estimate of each
@@ -45,7 +51,9 @@ class _Checker:
     half_length: float
     half_width: float
     margin: float
-    polys: FloatArray  # (2, V, K): x and y of each polygon's vertices, padded with its last
+    vx: FloatArray  # (V,): x and y of the obstacles' vertices, polygon after polygon
+    vy: FloatArray
+    offsets: NDArray[np.int64]  # (K + 1,): polygon k's vertices are offsets[k]:offsets[k + 1]
     bbox: FloatArray  # (K, 4)
     body: FloatArray = field(init=False)  # (2, q) body-frame points: footprint, then centre
     frames: tuple[FloatArray, ...] = field(init=False)
@@ -58,10 +66,11 @@ class _Checker:
                         [0.0, 0.0]])
         object.__setattr__(self, "body", np.ascontiguousarray(pts.T))
         cor = self.corridor
-        st = np.asarray(cor.s, dtype=float)
+        # writable copies: the compiled kernels take one array type
+        st = np.array(cor.s, dtype=float)
         h = cor.heading_at(st[:-1])
         ref = np.asarray(cor.reference, dtype=float)
-        left, right = np.asarray(cor.left, dtype=float), np.asarray(cor.right, dtype=float)
+        left, right = np.array(cor.left, dtype=float), np.array(cor.right, dtype=float)
         object.__setattr__(self, "frames", (
             st, ref[:-1, 0].copy(), ref[:-1, 1].copy(), np.cos(h), np.sin(h), left, right))
         # per segment, over the stations the footprint can reach from it: the narrowest
@@ -99,13 +108,13 @@ class _Checker:
         b = obstacles.bbox
         sel = np.flatnonzero((b[:, 0] <= hi[0]) & (b[:, 2] >= lo[0]) & (b[:, 1] <= hi[1])
                              & (b[:, 3] >= lo[1]))
-        start = obstacles.offsets[sel]
-        count = obstacles.offsets[sel + 1] - start
-        vmax = int(count.max()) if len(sel) else 3
-        idx = start[None, :] + np.minimum(np.arange(vmax)[:, None], count[None, :] - 1)
-        polys = np.moveaxis(obstacles.vertices[idx], 2, 0)  # (V, K, 2) -> (2, V, K)
+        count = obstacles.offsets[sel + 1] - obstacles.offsets[sel]
+        offsets = np.concatenate(([0], np.cumsum(count))).astype(np.int64)
+        idx = np.repeat(obstacles.offsets[sel] - offsets[:-1], count) + np.arange(offsets[-1])
+        verts = obstacles.vertices[idx]
         return cls(corridor, params.vehicle_length / 2.0, params.vehicle_width / 2.0,
-                   params.safety_margin, np.ascontiguousarray(polys), b[sel])
+                   params.safety_margin, np.ascontiguousarray(verts[:, 0]),
+                   np.ascontiguousarray(verts[:, 1]), offsets, np.ascontiguousarray(b[sel]))
 
     def stations(self, xy: FloatArray) -> FloatArray:
         """Stations [m] of points ``(n, 2)`` on the reference line (exact projection)."""
@@ -123,64 +132,13 @@ class _Checker:
         resampled finely, so one segment's frame is exact enough; past the ends, the end
         segments extend the road).
         """
-        st, rx, ry, hc, hs, left, right = self.frames
         if sc is None:
             sc = self.stations(xy)
-        inner = st[1:-1]
-        # footprint points (7, n): samples along the last axis, so that numpy's loops are long
-        bx, by = self.body[0, :, None], self.body[1, :, None]
-        c, s = np.cos(heading), np.sin(heading)
-        px = (xy[:, 0] + c * bx) - s * by
-        py = (xy[:, 1] + s * bx) + c * by
-        # segment at each station, the end segments beyond the ends: searching the inner
-        # stations gives it in 0 .. len(st) - 2 directly
-        i0 = np.searchsorted(inner, sc, side="right")
-        est = st[i0] + ((px - rx[i0]) * hc[i0] + (py - ry[i0]) * hs[i0])
-        i = np.searchsorted(inner, est, side="right")
-        dx, dy = px - rx[i], py - ry[i]
-        ci, si = hc[i], hs[i]
-        along = st[i] + dx * ci + dy * si
-        lat = dy * ci - dx * si
-        f = along[:-1]
-        to_left = (np.interp(f, st, left) - lat[:-1]).min(axis=0)
-        to_right = (lat[:-1] - np.interp(f, st, right)).min(axis=0)
-        # the edges' inward vertices, where the probes come within CORNER_BAND of an edge
-        near = np.flatnonzero(np.minimum(to_left, to_right) < self.margin + CORNER_BAND)
-        if len(near):
-            vl, vr = self._corner_distance(xy[near], c[near], s[near], along[-1, near])
-            to_left[near] = np.minimum(to_left[near], vl)
-            to_right[near] = np.minimum(to_right[near], vr)
+        to_left, to_right, station = _road_kernel(
+            *_xyh(xy, heading), np.asarray(sc, dtype=float), *self._road_args())
         if sides:
             return to_left, to_right
-        return np.minimum(to_left, to_right), along[-1]
-
-    def _corner_distance(self, xy: FloatArray, c: FloatArray, s: FloatArray,
-                         station: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Distance [m] from the footprints (centres ``xy``, headings' cosines and sines
-        ``c``, ``s``, centres' stations) to the inward vertices of the left and of the
-        right road edge, negative inside; ``inf`` where none is near."""
-        left = np.full(len(xy), np.inf)
-        right = np.full(len(xy), np.inf)
-        cs, cx, cy, cside = self.corners
-        reach = np.hypot(self.half_length, self.half_width) + self.margin + CORNER_BAND
-        lo = np.searchsorted(cs, station - reach, side="left")
-        hi = np.searchsorted(cs, station + reach, side="right")
-        count = hi - lo
-        if not count.any():
-            return left, right
-        js = np.repeat(np.arange(len(xy)), count)
-        ks = np.arange(int(count.sum())) + np.repeat(lo - np.cumsum(count) + count, count)
-        dx, dy = cx[ks] - xy[js, 0], cy[ks] - xy[js, 1]
-        gu = np.abs(dx * c[js] + dy * s[js]) - self.half_length
-        gv = np.abs(dy * c[js] - dx * s[js]) - self.half_width
-        d = np.where((gu <= 0) & (gv <= 0), np.maximum(gu, gv),
-                     np.hypot(np.maximum(gu, 0.0), np.maximum(gv, 0.0)))
-        # js is sorted: the minimum over each sample's run, per side
-        run = np.flatnonzero(np.concatenate(([True], js[1:] != js[:-1])))
-        is_left = cside[ks] > 0
-        left[js[run]] = np.minimum.reduceat(np.where(is_left, d, np.inf), run)
-        right[js[run]] = np.minimum.reduceat(np.where(is_left, np.inf, d), run)
-        return left, right
+        return np.minimum(to_left, to_right), station
 
     def slack(self, xy: FloatArray, heading: FloatArray, sc: FloatArray | None = None
               ) -> tuple[FloatArray, FloatArray]:
@@ -188,29 +146,8 @@ class _Checker:
         centres' stations [m] (see :meth:`road`)."""
         if sc is None:
             sc = self.stations(xy)
-        # the centres in the frame of the reference segment at their station (from the
-        # estimate, one step of refinement)
-        st, rx, ry, hc, hs, _, _ = self.frames
-        lmin, rmax, turn, seg_heading = self.window
-        sc_new = sc
-        for _ in range(2):
-            i = np.searchsorted(st[1:-1], sc_new, side="right")  # as in :meth:`road`
-            dx, dy = xy[:, 0] - rx[i], xy[:, 1] - ry[i]
-            ci, si = hc[i], hs[i]
-            sc_new = st[i] + dx * ci + dy * si
-        lat = dy * ci - dx * si
-        # clearly on the road (a lower bound of the clearance is above the margin): no
-        # exact check of the footprint
-        dh = heading - seg_heading[i]
-        ext = (self.half_length * np.abs(np.sin(dh)) + self.half_width * np.abs(np.cos(dh))
-               + (np.abs(lat) + self.half_length + self.half_width) * turn[i] + 0.05)
-        road = np.minimum(lmin[i] - lat, lat - rmax[i]) - ext
-        near_edge = np.flatnonzero(road < self.margin + 1e-6)
-        if len(near_edge):
-            road[near_edge], sc_new[near_edge] = self.road(
-                xy[near_edge], heading[near_edge], sc[near_edge])
-        near = self.obstacles(xy, heading, horizon=0.0, cull=True)
-        return np.minimum(near, road) - self.margin, sc_new
+        return _slack_kernel(*_xyh(xy, heading), np.asarray(sc, dtype=float),
+                             *self._road_args(), *self.window, *self._obstacle_args())
 
     def obstacles(self, xy: FloatArray, heading: FloatArray,
                   horizon: float = CLEARANCE_HORIZON, cull: bool = False) -> FloatArray:
@@ -218,119 +155,239 @@ class _Checker:
         ``margin + horizon`` (obstacles are culled by bounding box; with ``cull``, also
         those separated by more than that along the footprint's axes, so that ``inf``
         may stand for any distance beyond ``margin + horizon``)."""
-        out = np.full(len(xy), np.inf)
-        if len(self.bbox) == 0 or len(xy) == 0:
-            return out
-        r = np.hypot(self.half_length, self.half_width) + self.margin + horizon
-        b = self.bbox
-        lo, hi = xy.min(axis=0) - r, xy.max(axis=0) + r
-        near = np.flatnonzero((b[:, 0] <= hi[0]) & (b[:, 2] >= lo[0]) & (b[:, 1] <= hi[1])
-                              & (b[:, 3] >= lo[1]))
-        if len(near) == 0:
-            return out
-        b = b[near]
-        x, y = xy[:, 0, None], xy[:, 1, None]
-        hit = (b[:, 0] <= x + r) & (b[:, 2] >= x - r) & (b[:, 1] <= y + r) & (b[:, 3] >= y - r)
-        js, os = np.nonzero(hit)
-        os = near[os]
-        if len(js) == 0:
-            return out
-        u, v = _body_frame(xy[js], heading[js], np.take(self.polys, os, axis=2))
-        if cull:
-            gap = self.margin + horizon
-            keep = ((u.min(axis=0) < self.half_length + gap)
-                    & (u.max(axis=0) > -self.half_length - gap)
-                    & (v.min(axis=0) < self.half_width + gap)
-                    & (v.max(axis=0) > -self.half_width - gap))
-            js, u, v = js[keep], u[:, keep], v[:, keep]
-            if len(js) == 0:
-                return out
-        d = _rect_polygon_distance(u, v, self.half_length, self.half_width)
-        # js is sorted (np.nonzero is row-major): the minimum over each run
-        run = np.flatnonzero(np.concatenate(([True], js[1:] != js[:-1])))
-        out[js[run]] = np.minimum.reduceat(d, run)
+        return _obstacle_kernel(*_xyh(xy, heading), *self._obstacle_args(), self.half_length,
+                                self.half_width, self.margin, float(horizon), bool(cull))
+
+    def _road_args(self) -> tuple[Any, ...]:
+        reach = np.hypot(self.half_length, self.half_width) + self.margin + CORNER_BAND
+        return (*self.frames, *self.body, *self.corners, self.half_length, self.half_width,
+                self.margin, self.margin + CORNER_BAND, reach)
+
+    def _obstacle_args(self) -> tuple[Any, ...]:
+        return self.vx, self.vy, self.offsets, self.bbox
+
+
+def _xyh(xy: FloatArray, heading: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    return (np.ascontiguousarray(xy[:, 0], dtype=float),
+            np.ascontiguousarray(xy[:, 1], dtype=float),
+            np.ascontiguousarray(heading, dtype=float))
+
+
+# ---- compiled kernels: loops over samples, one call per check ---------------------------
+@njit(cache=True)
+def _upper(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
+    """``np.searchsorted(a, x, side="right")`` for a sorted ``a``."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def _lower(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
+    """``np.searchsorted(a, x, side="left")`` for a sorted ``a``."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def _interp(x: float, xp: FloatArray, fp: FloatArray) -> float:  # pragma: no cover
+    """``np.interp`` at one point."""
+    n = len(xp)
+    if x <= xp[0]:
+        return float(fp[0])
+    if x >= xp[n - 1]:
+        return float(fp[n - 1])
+    k = _upper(xp, x) - 1
+    return float((fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k]) * (x - xp[k]) + fp[k])
+
+
+@njit(cache=True)
+def _segment(st: FloatArray, s: float) -> int:  # pragma: no cover - compiled
+    """Reference segment holding station ``s``, the end segments beyond the ends."""
+    return _upper(st[1:-1], s)
+
+
+@njit(cache=True)
+def _road_one(x: float, y: float, h: float, sc: float, st: FloatArray, rx: FloatArray,
+              ry: FloatArray, hc: FloatArray, hs: FloatArray, left: FloatArray,
+              right: FloatArray, bu: FloatArray, bv: FloatArray, cs: FloatArray,
+              cx: FloatArray, cy: FloatArray, cside: FloatArray, hl: float, hw: float,
+              band: float, reach: float) -> tuple[float, float, float]:  # pragma: no cover
+    """Footprint of one pose to the left and right road edges [m], and its station [m]
+    (see :meth:`_Checker.road`)."""
+    c, s = np.cos(h), np.sin(h)
+    i0 = _segment(st, sc)
+    to_left = to_right = np.inf
+    station = sc
+    for p in range(len(bu)):
+        px = (x + c * bu[p]) - s * bv[p]
+        py = (y + s * bu[p]) + c * bv[p]
+        est = st[i0] + ((px - rx[i0]) * hc[i0] + (py - ry[i0]) * hs[i0])
+        i = _segment(st, est)
+        dx, dy = px - rx[i], py - ry[i]
+        along = st[i] + dx * hc[i] + dy * hs[i]
+        lat = dy * hc[i] - dx * hs[i]
+        if p == len(bu) - 1:  # the centre
+            station = along
+        else:
+            to_left = min(to_left, _interp(along, st, left) - lat)
+            to_right = min(to_right, lat - _interp(along, st, right))
+    if min(to_left, to_right) < band:
+        # the edges' inward vertices near the centre's station, by rectangle-point distance
+        for k in range(_lower(cs, station - reach), _upper(cs, station + reach)):
+            dx, dy = cx[k] - x, cy[k] - y
+            gu = abs(dx * c + dy * s) - hl
+            gv = abs(dy * c - dx * s) - hw
+            inside = gu <= 0 and gv <= 0
+            d = max(gu, gv) if inside else np.hypot(max(gu, 0.0), max(gv, 0.0))
+            if cside[k] > 0:
+                to_left = min(to_left, d)
+            else:
+                to_right = min(to_right, d)
+    return to_left, to_right, station
+
+
+@njit(cache=True)
+def _road_kernel(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray, st: FloatArray,
+                 rx: FloatArray, ry: FloatArray, hc: FloatArray, hs: FloatArray,
+                 left: FloatArray, right: FloatArray, bu: FloatArray, bv: FloatArray,
+                 cs: FloatArray, cx: FloatArray, cy: FloatArray, cside: FloatArray,
+                 hl: float, hw: float, margin: float, band: float, reach: float
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
+    """:meth:`_Checker.road` for each pose: to the left edge, to the right, stations."""
+    n = len(x)
+    to_left, to_right, station = np.empty(n), np.empty(n), np.empty(n)
+    for j in range(n):
+        to_left[j], to_right[j], station[j] = _road_one(
+            x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left, right, bu, bv, cs, cx, cy,
+            cside, hl, hw, band, reach)
+    return to_left, to_right, station
+
+
+@njit(cache=True)
+def _slack_kernel(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
+                  st: FloatArray, rx: FloatArray, ry: FloatArray, hc: FloatArray,
+                  hs: FloatArray, left: FloatArray, right: FloatArray, bu: FloatArray,
+                  bv: FloatArray, cs: FloatArray, cx: FloatArray, cy: FloatArray,
+                  cside: FloatArray, hl: float, hw: float, margin: float, band: float,
+                  reach: float, lmin: FloatArray, rmax: FloatArray, turn: FloatArray,
+                  seg_heading: FloatArray, vx: FloatArray, vy: FloatArray,
+                  offsets: NDArray[np.int64], bbox: FloatArray
+                  ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """:meth:`_Checker.slack`: clearance beyond the margin [m] and stations [m]."""
+    n = len(x)
+    road = np.empty(n)
+    station = np.empty(n)
+    for j in range(n):
+        # the centre in the frame of the reference segment at its station (from the
+        # estimate, one step of refinement)
+        s_new = sc[j]
+        i = 0
+        dx = dy = 0.0
+        for _ in range(2):
+            i = _segment(st, s_new)
+            dx, dy = x[j] - rx[i], y[j] - ry[i]
+            s_new = st[i] + dx * hc[i] + dy * hs[i]
+        lat = dy * hc[i] - dx * hs[i]
+        # clearly on the road (a lower bound of the clearance is above the margin): no
+        # exact check of the footprint
+        dh = h[j] - seg_heading[i]
+        ext = (hl * abs(np.sin(dh)) + hw * abs(np.cos(dh))
+               + (abs(lat) + hl + hw) * turn[i] + 0.05)
+        r = min(lmin[i] - lat, lat - rmax[i]) - ext
+        if r < margin + 1e-6:
+            tl, tr, s_new = _road_one(x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left,
+                                      right, bu, bv, cs, cx, cy, cside, hl, hw, band, reach)
+            r = min(tl, tr)
+        road[j] = r
+        station[j] = s_new
+    near = _obstacle_kernel(x, y, h, vx, vy, offsets, bbox, hl, hw, margin, 0.0, True)
+    return np.minimum(near, road) - margin, station
+
+
+@njit(cache=True)
+def _obstacle_kernel(x: FloatArray, y: FloatArray, h: FloatArray, vx: FloatArray,
+                     vy: FloatArray, offsets: NDArray[np.int64], bbox: FloatArray,
+                     hl: float, hw: float, margin: float, horizon: float, cull: bool
+                     ) -> FloatArray:  # pragma: no cover - compiled
+    """:meth:`_Checker.obstacles`: each pose's footprint to the nearest obstacle [m]."""
+    n = len(x)
+    out = np.full(n, np.inf)
+    k = len(offsets) - 1
+    if k == 0:
         return out
-
-
-def _body_frame(centers: FloatArray, headings: FloatArray, polys: FloatArray
-                ) -> tuple[FloatArray, FloatArray]:
-    """Vertices of polygons ``(2, V, p)`` (x and y) in the frames of poses ``(p, 2)``,
-    ``(p,)``: ``u`` [m] along the heading and ``v`` [m] to its left, each ``(V, p)``."""
-    c, s = np.cos(headings), np.sin(headings)
-    rx = polys[0] - centers[:, 0]
-    ry = polys[1] - centers[:, 1]
-    return rx * c + ry * s, ry * c - rx * s
-
-
-def _rect_polygon_distance(u: FloatArray, v: FloatArray, hl: float, hw: float) -> FloatArray:
-    """Distance ``(p,)`` [m] between the rectangle ``|u| <= hl``, ``|v| <= hw`` and polygons
-    given by their vertices ``(V, p)`` in its frame (:func:`_body_frame`), 0 on overlap.
-
-    Polygons run along the last axis (long rows, so that numpy's loops are long).
-    """
-    # squared distances: polygon vertices to the filled rectangle
-    gu = np.maximum(np.abs(u) - hl, 0.0)
-    gv = np.maximum(np.abs(v) - hw, 0.0)
-    out = (gu * gu + gv * gv).min(axis=0)
-    ub = np.concatenate((u[1:], u[:1]))  # the next vertex
-    vb = np.concatenate((v[1:], v[:1]))
-    du, dv = ub - u, vb - v
-    seg2 = du * du + dv * dv
-    inv = 1.0 / np.where(seg2 > 0, seg2, 1.0)
-    # rectangle corners to polygon edges (a loop: arrays for all corners at once are
-    # slower, out of cache)
-    for cu, cv in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw)):
-        wu, wv = cu - u, cv - v
-        t = wu * du
-        t += wv * dv
-        t *= inv
-        np.maximum(t, 0.0, out=t)
-        np.minimum(t, 1.0, out=t)
-        gu = t * du
-        gu -= wu
-        t *= dv
-        t -= wv
-        gu *= gu
-        t *= t
-        gu += t
-        np.minimum(out, gu.min(axis=0), out=out)
-    np.sqrt(out, out=out)
-    # overlap needs the polygon's extent to meet the rectangle: only there do the
-    # crossing and containment tests run
-    meet = np.flatnonzero((u.min(axis=0) <= hl) & (u.max(axis=0) >= -hl)
-                          & (v.min(axis=0) <= hw) & (v.max(axis=0) >= -hw))
-    if len(meet):
-        out[meet[_overlap(u[:, meet], v[:, meet], ub[:, meet], vb[:, meet], hl, hw)]] = 0.0
+    r = np.hypot(hl, hw) + margin + horizon
+    gap = margin + horizon
+    u = np.empty(int(np.max(offsets[1:] - offsets[:-1])))
+    v = np.empty_like(u)
+    for j in range(n):
+        c, s = np.cos(h[j]), np.sin(h[j])
+        for o in range(k):
+            if not (bbox[o, 0] <= x[j] + r and bbox[o, 2] >= x[j] - r
+                    and bbox[o, 1] <= y[j] + r and bbox[o, 3] >= y[j] - r):
+                continue
+            a0, m = offsets[o], offsets[o + 1] - offsets[o]
+            for q in range(m):
+                ex, ey = vx[a0 + q] - x[j], vy[a0 + q] - y[j]
+                u[q] = ex * c + ey * s
+                v[q] = ey * c - ex * s
+            if cull and not (u[:m].min() < hl + gap and u[:m].max() > -hl - gap
+                             and v[:m].min() < hw + gap and v[:m].max() > -hw - gap):
+                continue
+            out[j] = min(out[j], _rect_polygon_distance(u[:m], v[:m], hl, hw))
     return out
 
 
-def _overlap(u: FloatArray, v: FloatArray, ub: FloatArray, vb: FloatArray, hl: float,
-             hw: float) -> NDArray[np.bool_]:
-    """Whether polygons cross the rectangle ``|u| <= hl``, ``|v| <= hw`` or hold its centre.
-
-    ``u``, ``v`` ``(V, p)``: the vertices in the rectangle's frame; ``ub``, ``vb``: the next
-    vertex of each.
-    """
-    # polygon edges crossing the rectangle (Liang-Barsky clipping)
-    du, dv = ub - u, vb - v
-    t_in = np.zeros_like(u)
-    t_out = np.ones_like(u)
-    ok = np.ones(u.shape, dtype=bool)
-    for a, d, h in ((u, du, hl), (v, dv, hw)):
-        flat = np.abs(d) < 1e-15
-        ok &= ~flat | (np.abs(a) <= h)
-        # (flat edges' quotients, inf or nan or overflowing, are replaced just below)
-        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-            t1 = (-h - a) / d
-            t2 = (h - a) / d
-        lo = np.where(flat, -np.inf, np.minimum(t1, t2))
-        hi = np.where(flat, np.inf, np.maximum(t1, t2))
-        np.maximum(t_in, lo, out=t_in)
-        np.minimum(t_out, hi, out=t_out)
-    crosses = (ok & (t_in <= t_out)).any(axis=0)
-    # rectangle inside the polygon: its centre (the origin) by crossing number
-    straddle = (v > 0) != (vb > 0)
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        ucross = u - v * du / dv
-    inside = (straddle & (ucross > 0)).sum(axis=0) % 2 == 1
-    return np.asarray(crosses | inside)
+@njit(cache=True)
+def _rect_polygon_distance(u: FloatArray, v: FloatArray, hl: float, hw: float
+                           ) -> float:  # pragma: no cover - compiled
+    """Distance [m] between the rectangle ``|u| <= hl``, ``|v| <= hw`` and a polygon given
+    by its vertices ``u``, ``v`` ``(V,)`` in the rectangle's frame, 0 on overlap."""
+    m = len(u)
+    best = np.inf
+    crosses = False
+    winding = 0
+    meet = u.min() <= hl and u.max() >= -hl and v.min() <= hw and v.max() >= -hw
+    for a in range(m):
+        b = a + 1 if a + 1 < m else 0
+        # the vertex to the filled rectangle
+        gu, gv = max(abs(u[a]) - hl, 0.0), max(abs(v[a]) - hw, 0.0)
+        best = min(best, gu * gu + gv * gv)
+        # the rectangle's corners to the edge a-b
+        du, dv = u[b] - u[a], v[b] - v[a]
+        seg2 = du * du + dv * dv
+        inv = 1.0 / seg2 if seg2 > 0 else 1.0
+        for cu, cv in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw)):
+            wu, wv = cu - u[a], cv - v[a]
+            t = min(max((wu * du + wv * dv) * inv, 0.0), 1.0)
+            eu, ev = t * du - wu, t * dv - wv
+            best = min(best, eu * eu + ev * ev)
+        if not meet:
+            continue
+        # the edge crossing the rectangle (Liang-Barsky clipping)
+        t_in, t_out, ok = 0.0, 1.0, True
+        for p0, d, lim in ((u[a], du, hl), (v[a], dv, hw)):
+            if abs(d) < 1e-15:
+                ok = ok and abs(p0) <= lim
+            else:
+                t1, t2 = (-lim - p0) / d, (lim - p0) / d
+                t_in = max(t_in, min(t1, t2))
+                t_out = min(t_out, max(t1, t2))
+        crosses = crosses or (ok and t_in <= t_out)
+        # the rectangle's centre inside the polygon, by crossing number
+        if (v[a] > 0) != (v[b] > 0) and u[a] - v[a] * du / dv > 0:
+            winding += 1
+    if meet and (crosses or winding % 2 == 1):
+        return 0.0
+    return float(np.sqrt(best))
