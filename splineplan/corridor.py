@@ -11,7 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numba import njit
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from splineplan.errors import GeometryError
@@ -69,6 +70,9 @@ class Corridor:
     _heading: FloatArray = field(init=False, repr=False)
     _cos: FloatArray = field(init=False, repr=False)
     _sin: FloatArray = field(init=False, repr=False)
+    _ref_x: FloatArray = field(init=False, repr=False)
+    _ref_y: FloatArray = field(init=False, repr=False)
+    _s: FloatArray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if len(self.reference) < 2 or self.s[-1] <= 0:
@@ -95,6 +99,10 @@ class Corridor:
         object.__setattr__(self, "_cos", np.cos(self._heading))
         object.__setattr__(self, "_sin", np.sin(self._heading))
         object.__setattr__(self, "_tree", cKDTree(self.reference))
+        # writable contiguous copies for the compiled projection (one array type)
+        object.__setattr__(self, "_ref_x", np.array(self.reference[:, 0], dtype=float))
+        object.__setattr__(self, "_ref_y", np.array(self.reference[:, 1], dtype=float))
+        object.__setattr__(self, "_s", np.array(self.s, dtype=float))
 
     # -- construction -------------------------------------------------------------------
     @classmethod
@@ -201,27 +209,9 @@ class Corridor:
         """
         pts = np.atleast_2d(np.asarray(xy, dtype=float))
         _, k = self._tree.query(pts)
-        nseg = len(self.reference) - 1
-        best_s = np.empty(len(pts))
-        best_l = np.empty(len(pts))
-        best_d = np.full(len(pts), np.inf)
-        for cand in (k - 1, k):
-            i = np.minimum(np.maximum(cand, 0), nseg - 1)
-            c, s = self._cos[i], self._sin[i]
-            dx = pts[:, 0] - self.reference[i, 0]
-            dy = pts[:, 1] - self.reference[i, 1]
-            along = dx * c + dy * s
-            lat = -dx * s + dy * c
-            seg_len = self.s[i + 1] - self.s[i]
-            lo = np.where(i == 0, -np.inf, 0.0)
-            hi = np.where(i == nseg - 1, np.inf, seg_len)
-            t = np.minimum(np.maximum(along, lo), hi)
-            dist = np.hypot(along - t, lat)
-            better = dist < best_d
-            best_d = np.where(better, dist, best_d)
-            best_s = np.where(better, self.s[i] + along, best_s)
-            best_l = np.where(better, lat, best_l)
-        return np.column_stack((best_s, best_l))
+        return _project_kernel(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
+                               np.asarray(k, dtype=np.int64), self._ref_x, self._ref_y,
+                               self._cos, self._sin, self._s)
 
     def contains(self, xy: ArrayLike, margin: float = 0.0) -> np.ndarray:
         """Whether points ``(n, 2)`` lie on the road, at least ``margin`` [m] inside."""
@@ -301,6 +291,34 @@ class Corridor:
         sl = self.to_sl(boundary)
         order = np.argsort(sl[:, 0], kind="stable")
         return np.interp(self.s, sl[order, 0], sl[order, 1])
+
+
+@njit(cache=True)
+def _project_kernel(px: FloatArray, py: FloatArray, nearest: NDArray[np.int64],
+                    rx: FloatArray, ry: FloatArray, cos: FloatArray, sin: FloatArray,
+                    st: FloatArray) -> FloatArray:  # pragma: no cover - compiled
+    """Stations and offsets ``(n, 2)`` of points on the reference line (vertices ``rx``,
+    ``ry`` at stations ``st``, segment directions ``cos``, ``sin``): of the two segments
+    at each point's nearest vertex, the nearer; the end segments extend past the ends."""
+    n = len(px)
+    nseg = len(rx) - 1
+    out = np.full((n, 2), np.nan)  # nan for a point that is not a number
+    for j in range(n):
+        best = np.inf
+        for cand in (nearest[j] - 1, nearest[j]):
+            i = min(max(cand, 0), nseg - 1)
+            dx, dy = px[j] - rx[i], py[j] - ry[i]
+            along = dx * cos[i] + dy * sin[i]
+            lat = -dx * sin[i] + dy * cos[i]
+            lo = -np.inf if i == 0 else 0.0
+            hi = np.inf if i == nseg - 1 else st[i + 1] - st[i]
+            t = min(max(along, lo), hi)
+            dist = np.hypot(along - t, lat)
+            if dist < best:
+                best = dist
+                out[j, 0] = st[i] + along
+                out[j, 1] = lat
+    return out
 
 
 def _as_polyline(points: ArrayLike, what: str) -> FloatArray:

@@ -201,21 +201,33 @@ def _lower(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
 
 
 @njit(cache=True)
-def _interp(x: float, xp: FloatArray, fp: FloatArray) -> float:  # pragma: no cover
-    """``np.interp`` at one point."""
+def _segment(st: FloatArray, s: float, guess: int = -1) -> int:  # pragma: no cover
+    """Reference segment holding station ``s`` (``st``: the vertices' stations), the end
+    segments beyond the ends: ``np.searchsorted(st[1:-1], s, side="right")``. From a
+    ``guess`` nearby, a few steps of walking; else a binary search."""
+    last = len(st) - 2
+    if 0 <= guess <= last:
+        i = guess
+        for _ in range(8):
+            if i > 0 and s < st[i]:
+                i -= 1
+            elif i < last and s >= st[i + 1]:
+                i += 1
+            else:
+                return i
+    return _upper(st[1:-1], s)
+
+
+@njit(cache=True)
+def _interp_near(x: float, xp: FloatArray, fp: FloatArray, guess: int) -> float:
+    """``np.interp`` at one point, searching from the interval ``guess`` nearby."""
     n = len(xp)
     if x <= xp[0]:
         return float(fp[0])
     if x >= xp[n - 1]:
         return float(fp[n - 1])
-    k = _upper(xp, x) - 1
+    k = _segment(xp, x, guess)
     return float((fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k]) * (x - xp[k]) + fp[k])
-
-
-@njit(cache=True)
-def _segment(st: FloatArray, s: float) -> int:  # pragma: no cover - compiled
-    """Reference segment holding station ``s``, the end segments beyond the ends."""
-    return _upper(st[1:-1], s)
 
 
 @njit(cache=True)
@@ -223,26 +235,27 @@ def _road_one(x: float, y: float, h: float, sc: float, st: FloatArray, rx: Float
               ry: FloatArray, hc: FloatArray, hs: FloatArray, left: FloatArray,
               right: FloatArray, bu: FloatArray, bv: FloatArray, cs: FloatArray,
               cx: FloatArray, cy: FloatArray, cside: FloatArray, hl: float, hw: float,
-              band: float, reach: float) -> tuple[float, float, float]:  # pragma: no cover
+              band: float, reach: float, guess: int
+              ) -> tuple[float, float, float]:  # pragma: no cover - compiled
     """Footprint of one pose to the left and right road edges [m], and its station [m]
-    (see :meth:`_Checker.road`)."""
+    (see :meth:`_Checker.road`; ``guess``: a reference segment near station ``sc``)."""
     c, s = np.cos(h), np.sin(h)
-    i0 = _segment(st, sc)
+    i0 = _segment(st, sc, guess)
     to_left = to_right = np.inf
     station = sc
     for p in range(len(bu)):
         px = (x + c * bu[p]) - s * bv[p]
         py = (y + s * bu[p]) + c * bv[p]
         est = st[i0] + ((px - rx[i0]) * hc[i0] + (py - ry[i0]) * hs[i0])
-        i = _segment(st, est)
+        i = _segment(st, est, i0)
         dx, dy = px - rx[i], py - ry[i]
         along = st[i] + dx * hc[i] + dy * hs[i]
         lat = dy * hc[i] - dx * hs[i]
         if p == len(bu) - 1:  # the centre
             station = along
         else:
-            to_left = min(to_left, _interp(along, st, left) - lat)
-            to_right = min(to_right, lat - _interp(along, st, right))
+            to_left = min(to_left, _interp_near(along, st, left, i) - lat)
+            to_right = min(to_right, lat - _interp_near(along, st, right, i))
     if min(to_left, to_right) < band:
         # the edges' inward vertices near the centre's station, by rectangle-point distance
         for k in range(_lower(cs, station - reach), _upper(cs, station + reach)):
@@ -268,10 +281,12 @@ def _road_kernel(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray, st
     """:meth:`_Checker.road` for each pose: to the left edge, to the right, stations."""
     n = len(x)
     to_left, to_right, station = np.empty(n), np.empty(n), np.empty(n)
+    i = -1  # the previous sample's segment: samples run along the curve
     for j in range(n):
+        i = _segment(st, sc[j], i)
         to_left[j], to_right[j], station[j] = _road_one(
             x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left, right, bu, bv, cs, cx, cy,
-            cside, hl, hw, band, reach)
+            cside, hl, hw, band, reach, i)
     return to_left, to_right, station
 
 
@@ -289,14 +304,14 @@ def _slack_kernel(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
     n = len(x)
     road = np.empty(n)
     station = np.empty(n)
+    i = -1  # the previous sample's segment: samples run along the curve
     for j in range(n):
         # the centre in the frame of the reference segment at its station (from the
         # estimate, one step of refinement)
         s_new = sc[j]
-        i = 0
         dx = dy = 0.0
         for _ in range(2):
-            i = _segment(st, s_new)
+            i = _segment(st, s_new, i)
             dx, dy = x[j] - rx[i], y[j] - ry[i]
             s_new = st[i] + dx * hc[i] + dy * hs[i]
         lat = dy * hc[i] - dx * hs[i]
@@ -308,7 +323,8 @@ def _slack_kernel(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
         r = min(lmin[i] - lat, lat - rmax[i]) - ext
         if r < margin + 1e-6:
             tl, tr, s_new = _road_one(x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left,
-                                      right, bu, bv, cs, cx, cy, cside, hl, hw, band, reach)
+                                      right, bu, bv, cs, cx, cy, cside, hl, hw, band, reach,
+                                      i)
             r = min(tl, tr)
         road[j] = r
         station[j] = s_new
