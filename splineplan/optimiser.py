@@ -42,52 +42,66 @@ def _basis(u: FloatArray, t: FloatArray, k: int, n: int) -> tuple[NDArray[np.int
 
     ``basis[nu, :, j]`` holds the values at ``u[j]`` of the basis functions of control
     points ``first[j] .. first[j] + k`` (the only ones that are not zero there) and their
-    first and second derivatives with respect to the parameter (Cox-de Boor recursion,
-    vectorised over the samples, which run along the last axis; at ``u = 1`` the left
-    limits).
+    first and second derivatives with respect to the parameter (Cox-de Boor recursion; at
+    ``u = 1`` the left limits).
     """
-    span = np.clip(np.searchsorted(t, u, side="right") - 1, k, n - 1)
-    first = span - k
-    m = len(u)
-    # the knots around each sample: row r holds t[span + r - k], r = 0 .. 2k + 1
-    tt = t[span + np.arange(-k, k + 2)[:, None]]
-    tables = [np.ones((1, m))]
-    for p in range(1, k + 1):
-        # functions span - p .. span: t[i], t[i + 1], t[i + p], t[i + p + 1] as rows of tt
-        ti, ti1 = tt[k - p:k + 1], tt[k - p + 1:k + 2]
-        tip, tip1 = tt[k:k + p + 1], tt[k + 1:k + p + 2]
-        ext = _pad(tables[-1])
-        left = _ratio(u - ti, tip - ti)
-        right = _ratio(tip1 - u, tip1 - ti1)
-        tables.append(left * ext[:-1] + right * ext[1:])
-    vals = np.zeros((3, k + 1, m))
-    vals[0] = tables[k]
-    vals[1] = _derive(tables[k - 1], tt, k, k)
-    if k >= 2:
-        vals[2] = _derive(_derive(tables[k - 2], tt, k, k - 1), tt, k, k)
-    return first.astype(np.int64), vals
+    return _basis_kernel(np.ascontiguousarray(u, dtype=float),
+                         np.ascontiguousarray(t, dtype=float), k, n)
 
 
-def _pad(b: FloatArray) -> FloatArray:
-    """A zero row on each side of ``(p, m)``."""
-    out = np.zeros((b.shape[0] + 2, b.shape[1]))
-    out[1:-1] = b
-    return out
-
-
-def _ratio(a: FloatArray, b: FloatArray) -> FloatArray:
+@njit(cache=True)
+def _ratio(a: float, b: float) -> float:  # pragma: no cover - compiled
     """``a / b`` where ``b > 0``, else 0."""
-    return np.divide(a, b, out=np.zeros(np.broadcast(a, b).shape), where=b > 0)
+    return a / b if b > 0 else 0.0
 
 
-def _derive(b: FloatArray, tt: FloatArray, k: int, p: int) -> FloatArray:
-    """Parameter derivatives ``(p + 1, m)`` of the degree-``p`` basis functions
-    ``span - p .. span`` from the degree ``p - 1`` ones ``b`` ``(p, m)``:
+@njit(cache=True)
+def _basis_kernel(u: FloatArray, t: FloatArray, k: int, n: int
+                  ) -> tuple[NDArray[np.int64], FloatArray]:  # pragma: no cover - compiled
+    """:func:`_basis`, one sample at a time."""
+    m = len(u)
+    first = np.empty(m, dtype=np.int64)
+    vals = np.zeros((3, k + 1, m))
+    tt = np.empty(2 * k + 2)
+    # tables[p, :p + 1]: the degree-p functions span - p .. span; ext: one padded table
+    tables = np.zeros((k + 1, k + 1))
+    ext = np.zeros(k + 3)
+    der = np.zeros(k + 1)
+    for j in range(m):
+        span = min(max(np.searchsorted(t, u[j], side="right") - 1, k), n - 1)
+        first[j] = span - k
+        # the knots around the sample: tt[r] = t[span + r - k], r = 0 .. 2k + 1
+        for r in range(2 * k + 2):
+            tt[r] = t[span + r - k]
+        tables[0, 0] = 1.0
+        for p in range(1, k + 1):
+            ext[0] = ext[p + 1] = 0.0
+            ext[1:p + 1] = tables[p - 1, :p]
+            for q in range(p + 1):
+                # function span - p + q: knots t[i], t[i + 1], t[i + p], t[i + p + 1]
+                ti, ti1, tip, tip1 = tt[k - p + q], tt[k - p + 1 + q], tt[k + q], tt[k + 1 + q]
+                tables[p, q] = (_ratio(u[j] - ti, tip - ti) * ext[q]
+                                + _ratio(tip1 - u[j], tip1 - ti1) * ext[q + 1])
+        vals[0, :, j] = tables[k, :k + 1]
+        _derive_into(tables[k - 1, :k], tt, k, k, vals[1, :, j])
+        if k >= 2:
+            _derive_into(tables[k - 2, :k - 1], tt, k, k - 1, der[:k])
+            _derive_into(der[:k], tt, k, k, vals[2, :, j])
+    return first, vals
+
+
+@njit(cache=True)
+def _derive_into(b: FloatArray, tt: FloatArray, k: int, p: int,
+                 out: FloatArray) -> None:  # pragma: no cover - compiled
+    """Parameter derivatives ``(p + 1,)`` of the degree-``p`` basis functions
+    ``span - p .. span`` from the degree ``p - 1`` ones ``b`` ``(p,)``, into ``out``:
     ``N'_{i,p} = p (N_{i,p-1} / (t_{i+p} - t_i) - N_{i+1,p-1} / (t_{i+p+1} - t_{i+1}))``
-    (``tt``: the knots around the samples, as in :func:`_basis`)."""
-    ext = _pad(b)
-    return p * (_ratio(ext[:-1], tt[k:k + p + 1] - tt[k - p:k + 1])
-                - _ratio(ext[1:], tt[k + 1:k + p + 2] - tt[k - p + 1:k + 2]))
+    (``tt``: the knots around the sample, as in :func:`_basis_kernel`)."""
+    for q in range(p + 1):
+        lo = b[q - 1] if q >= 1 else 0.0
+        hi = b[q] if q < p else 0.0
+        out[q] = p * (_ratio(lo, tt[k + q] - tt[k - p + q])
+                      - _ratio(hi, tt[k + 1 + q] - tt[k - p + 1 + q]))
 
 
 def _greville(t: FloatArray, k: int, n: int) -> FloatArray:
@@ -177,7 +191,8 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
     Returns the curve, the rounds, the number of control points doubled and the curve's
     samples (positions, derivatives, footprint slack, stations) for the optimiser.
     """
-    counts = counts.copy()
+    counts = counts.astype(np.int64)  # a copy
+    pool = np.ascontiguousarray(pool, dtype=float)
     rounds = doubled = stall = 0
     n_pool = len(pool)
     # the candidates' stations: blended by the basis, they estimate the samples' stations,
@@ -201,25 +216,7 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
         bad = np.flatnonzero(slack < 0)
         if len(bad) == 0 or rounds >= params.repair_rounds or stall >= 2:
             break
-        k = curve.k
-        n = len(pool_idx)
-        add = np.zeros(n_pool, dtype=bool)
-        dup = np.zeros(n_pool, dtype=bool)
-        for j in bad.tolist():
-            f = int(curve.first[j])
-            shaping = np.arange(f, min(f + k, n - 1) + 1)
-            a, b = int(pool_idx[shaping[0]]), int(pool_idx[shaping[-1]])
-            free = np.flatnonzero(counts[a + 1:b] == 0) + a + 1
-            if len(free):
-                add[free[np.argmin(np.hypot(*(pool[free] - pos[j]).T))]] = True
-        if not add.any():
-            # no vertex left to re-insert: double the control point nearest each violation
-            for j in bad.tolist():
-                f = int(curve.first[j])
-                inner = pool_idx[f:min(f + k, n - 1) + 1]
-                inner = inner[(inner >= 2) & (inner < n_pool - 1) & (counts[inner] < k)]
-                if len(inner):
-                    dup[inner[np.argmin(np.hypot(*(pool[inner] - pos[j]).T))]] = True
+        add, dup = _repair_marks(bad, curve.first, pool_idx, counts, pool, pos, curve.k)
         if not (add.any() or dup.any()):
             break
         counts[add] = 1
@@ -234,6 +231,43 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
         curve, samples, pushes = _push(curve, samples, checker, params,
                                        pool_s[curve.pool_index])
     return curve, best[2] + pushes, best[3], samples
+
+
+@njit(cache=True)
+def _repair_marks(bad: NDArray[np.int64], first: NDArray[np.int64],
+                  pool_idx: NDArray[np.int64], counts: NDArray[np.int64], pool: FloatArray,
+                  pos: FloatArray, k: int
+                  ) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:  # pragma: no cover
+    """The candidates :func:`_refine` re-inserts for the violating samples ``bad`` (the
+    left-out one nearest each, between its shaping control points), and, where none is
+    left for any, the control points it doubles (the inner shaping one nearest each,
+    fewer than ``k`` copies so far)."""
+    n, n_pool = len(pool_idx), len(pool)
+    add = np.zeros(n_pool, dtype=np.bool_)
+    dup = np.zeros(n_pool, dtype=np.bool_)
+    for j in bad:
+        a, b = pool_idx[first[j]], pool_idx[min(first[j] + k, n - 1)]
+        best, pick = np.inf, -1
+        for c in range(a + 1, b):
+            if counts[c] == 0:
+                d = np.hypot(pool[c, 0] - pos[j, 0], pool[c, 1] - pos[j, 1])
+                if d < best:
+                    best, pick = d, c
+        if pick >= 0:
+            add[pick] = True
+    if add.any():
+        return add, dup
+    for j in bad:
+        best, pick = np.inf, -1
+        for r in range(first[j], min(first[j] + k, n - 1) + 1):
+            c = pool_idx[r]
+            if 2 <= c < n_pool - 1 and counts[c] < k:
+                d = np.hypot(pool[c, 0] - pos[j, 0], pool[c, 1] - pos[j, 1])
+                if d < best:
+                    best, pick = d, c
+        if pick >= 0:
+            dup[pick] = True
+    return add, dup
 
 
 def _push(curve: _Curve, samples: tuple[FloatArray, ...], checker: _Checker,
