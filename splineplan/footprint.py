@@ -20,10 +20,10 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numba import njit
 from numpy.typing import NDArray
 from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
+from splineplan import kernels
 from splineplan.corridor import Corridor
 from splineplan.geometry import FloatArray
 from splineplan.obstacles import Obstacles
@@ -134,7 +134,7 @@ class _Checker:
         """
         if sc is None:
             sc = self.stations(xy)
-        to_left, to_right, station = _road_kernel(
+        to_left, to_right, station = kernels.road_clearance(
             *_xyh(xy, heading), np.asarray(sc, dtype=float), *self._road_args())
         if sides:
             return to_left, to_right
@@ -146,7 +146,7 @@ class _Checker:
         centres' stations [m] (see :meth:`road`)."""
         if sc is None:
             sc = self.stations(xy)
-        return _slack_kernel(*_xyh(xy, heading), np.asarray(sc, dtype=float),
+        return kernels.footprint_slack(*_xyh(xy, heading), np.asarray(sc, dtype=float),
                              *self._road_args(), *self.window, *self._obstacle_args())
 
     def obstacles(self, xy: FloatArray, heading: FloatArray,
@@ -155,8 +155,9 @@ class _Checker:
         ``margin + horizon`` (obstacles are culled by bounding box; with ``cull``, also
         those separated by more than that along the footprint's axes, so that ``inf``
         may stand for any distance beyond ``margin + horizon``)."""
-        return _obstacle_kernel(*_xyh(xy, heading), *self._obstacle_args(), self.half_length,
-                                self.half_width, self.margin, float(horizon), bool(cull))
+        return kernels.obstacle_clearance(*_xyh(xy, heading), *self._obstacle_args(),
+                                          self.half_length, self.half_width, self.margin,
+                                          float(horizon), bool(cull))
 
     def _road_args(self) -> tuple[Any, ...]:
         reach = np.hypot(self.half_length, self.half_width) + self.margin + CORNER_BAND
@@ -171,239 +172,3 @@ def _xyh(xy: FloatArray, heading: FloatArray) -> tuple[FloatArray, FloatArray, F
     return (np.ascontiguousarray(xy[:, 0], dtype=float),
             np.ascontiguousarray(xy[:, 1], dtype=float),
             np.ascontiguousarray(heading, dtype=float))
-
-
-# ---- compiled kernels: loops over samples, one call per check ---------------------------
-@njit(cache=True)
-def _upper(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
-    """``np.searchsorted(a, x, side="right")`` for a sorted ``a``."""
-    lo, hi = 0, len(a)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if a[mid] <= x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True)
-def _lower(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
-    """``np.searchsorted(a, x, side="left")`` for a sorted ``a``."""
-    lo, hi = 0, len(a)
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if a[mid] < x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo
-
-
-@njit(cache=True)
-def _segment(st: FloatArray, s: float, guess: int = -1) -> int:  # pragma: no cover
-    """Reference segment holding station ``s`` (``st``: the vertices' stations), the end
-    segments beyond the ends: ``np.searchsorted(st[1:-1], s, side="right")``. From a
-    ``guess`` nearby, a few steps of walking; else a binary search."""
-    last = len(st) - 2
-    if 0 <= guess <= last:
-        i = guess
-        for _ in range(8):
-            if i > 0 and s < st[i]:
-                i -= 1
-            elif i < last and s >= st[i + 1]:
-                i += 1
-            else:
-                return i
-    return _upper(st[1:-1], s)
-
-
-@njit(cache=True)
-def _interp_near(x: float, xp: FloatArray, fp: FloatArray, guess: int) -> float:
-    """``np.interp`` at one point, searching from the interval ``guess`` nearby."""
-    n = len(xp)
-    if x <= xp[0]:
-        return float(fp[0])
-    if x >= xp[n - 1]:
-        return float(fp[n - 1])
-    k = _segment(xp, x, guess)
-    return float((fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k]) * (x - xp[k]) + fp[k])
-
-
-@njit(cache=True)
-def _road_one(x: float, y: float, h: float, sc: float, st: FloatArray, rx: FloatArray,
-              ry: FloatArray, hc: FloatArray, hs: FloatArray, left: FloatArray,
-              right: FloatArray, bu: FloatArray, bv: FloatArray, cs: FloatArray,
-              cx: FloatArray, cy: FloatArray, cside: FloatArray, hl: float, hw: float,
-              band: float, reach: float, guess: int
-              ) -> tuple[float, float, float]:  # pragma: no cover - compiled
-    """Footprint of one pose to the left and right road edges [m], and its station [m]
-    (see :meth:`_Checker.road`; ``guess``: a reference segment near station ``sc``)."""
-    c, s = np.cos(h), np.sin(h)
-    i0 = _segment(st, sc, guess)
-    to_left = to_right = np.inf
-    station = sc
-    for p in range(len(bu)):
-        px = (x + c * bu[p]) - s * bv[p]
-        py = (y + s * bu[p]) + c * bv[p]
-        est = st[i0] + ((px - rx[i0]) * hc[i0] + (py - ry[i0]) * hs[i0])
-        i = _segment(st, est, i0)
-        dx, dy = px - rx[i], py - ry[i]
-        along = st[i] + dx * hc[i] + dy * hs[i]
-        lat = dy * hc[i] - dx * hs[i]
-        if p == len(bu) - 1:  # the centre
-            station = along
-        else:
-            to_left = min(to_left, _interp_near(along, st, left, i) - lat)
-            to_right = min(to_right, lat - _interp_near(along, st, right, i))
-    if min(to_left, to_right) < band:
-        # the edges' inward vertices near the centre's station, by rectangle-point distance
-        for k in range(_lower(cs, station - reach), _upper(cs, station + reach)):
-            dx, dy = cx[k] - x, cy[k] - y
-            gu = abs(dx * c + dy * s) - hl
-            gv = abs(dy * c - dx * s) - hw
-            inside = gu <= 0 and gv <= 0
-            d = max(gu, gv) if inside else np.hypot(max(gu, 0.0), max(gv, 0.0))
-            if cside[k] > 0:
-                to_left = min(to_left, d)
-            else:
-                to_right = min(to_right, d)
-    return to_left, to_right, station
-
-
-@njit(cache=True)
-def _road_kernel(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray, st: FloatArray,
-                 rx: FloatArray, ry: FloatArray, hc: FloatArray, hs: FloatArray,
-                 left: FloatArray, right: FloatArray, bu: FloatArray, bv: FloatArray,
-                 cs: FloatArray, cx: FloatArray, cy: FloatArray, cside: FloatArray,
-                 hl: float, hw: float, margin: float, band: float, reach: float
-                 ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
-    """:meth:`_Checker.road` for each pose: to the left edge, to the right, stations."""
-    n = len(x)
-    to_left, to_right, station = np.empty(n), np.empty(n), np.empty(n)
-    i = -1  # the previous sample's segment: samples run along the curve
-    for j in range(n):
-        i = _segment(st, sc[j], i)
-        to_left[j], to_right[j], station[j] = _road_one(
-            x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left, right, bu, bv, cs, cx, cy,
-            cside, hl, hw, band, reach, i)
-    return to_left, to_right, station
-
-
-@njit(cache=True)
-def _slack_kernel(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
-                  st: FloatArray, rx: FloatArray, ry: FloatArray, hc: FloatArray,
-                  hs: FloatArray, left: FloatArray, right: FloatArray, bu: FloatArray,
-                  bv: FloatArray, cs: FloatArray, cx: FloatArray, cy: FloatArray,
-                  cside: FloatArray, hl: float, hw: float, margin: float, band: float,
-                  reach: float, lmin: FloatArray, rmax: FloatArray, turn: FloatArray,
-                  seg_heading: FloatArray, vx: FloatArray, vy: FloatArray,
-                  offsets: NDArray[np.int64], bbox: FloatArray
-                  ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
-    """:meth:`_Checker.slack`: clearance beyond the margin [m] and stations [m]."""
-    n = len(x)
-    road = np.empty(n)
-    station = np.empty(n)
-    i = -1  # the previous sample's segment: samples run along the curve
-    for j in range(n):
-        # the centre in the frame of the reference segment at its station (from the
-        # estimate, one step of refinement)
-        s_new = sc[j]
-        dx = dy = 0.0
-        for _ in range(2):
-            i = _segment(st, s_new, i)
-            dx, dy = x[j] - rx[i], y[j] - ry[i]
-            s_new = st[i] + dx * hc[i] + dy * hs[i]
-        lat = dy * hc[i] - dx * hs[i]
-        # clearly on the road (a lower bound of the clearance is above the margin): no
-        # exact check of the footprint
-        dh = h[j] - seg_heading[i]
-        ext = (hl * abs(np.sin(dh)) + hw * abs(np.cos(dh))
-               + (abs(lat) + hl + hw) * turn[i] + 0.05)
-        r = min(lmin[i] - lat, lat - rmax[i]) - ext
-        if r < margin + 1e-6:
-            tl, tr, s_new = _road_one(x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left,
-                                      right, bu, bv, cs, cx, cy, cside, hl, hw, band, reach,
-                                      i)
-            r = min(tl, tr)
-        road[j] = r
-        station[j] = s_new
-    near = _obstacle_kernel(x, y, h, vx, vy, offsets, bbox, hl, hw, margin, 0.0, True)
-    return np.minimum(near, road) - margin, station
-
-
-@njit(cache=True)
-def _obstacle_kernel(x: FloatArray, y: FloatArray, h: FloatArray, vx: FloatArray,
-                     vy: FloatArray, offsets: NDArray[np.int64], bbox: FloatArray,
-                     hl: float, hw: float, margin: float, horizon: float, cull: bool
-                     ) -> FloatArray:  # pragma: no cover - compiled
-    """:meth:`_Checker.obstacles`: each pose's footprint to the nearest obstacle [m]."""
-    n = len(x)
-    out = np.full(n, np.inf)
-    k = len(offsets) - 1
-    if k == 0:
-        return out
-    r = np.hypot(hl, hw) + margin + horizon
-    gap = margin + horizon
-    u = np.empty(int(np.max(offsets[1:] - offsets[:-1])))
-    v = np.empty_like(u)
-    for j in range(n):
-        c, s = np.cos(h[j]), np.sin(h[j])
-        for o in range(k):
-            if not (bbox[o, 0] <= x[j] + r and bbox[o, 2] >= x[j] - r
-                    and bbox[o, 1] <= y[j] + r and bbox[o, 3] >= y[j] - r):
-                continue
-            a0, m = offsets[o], offsets[o + 1] - offsets[o]
-            for q in range(m):
-                ex, ey = vx[a0 + q] - x[j], vy[a0 + q] - y[j]
-                u[q] = ex * c + ey * s
-                v[q] = ey * c - ex * s
-            if cull and not (u[:m].min() < hl + gap and u[:m].max() > -hl - gap
-                             and v[:m].min() < hw + gap and v[:m].max() > -hw - gap):
-                continue
-            out[j] = min(out[j], _rect_polygon_distance(u[:m], v[:m], hl, hw))
-    return out
-
-
-@njit(cache=True)
-def _rect_polygon_distance(u: FloatArray, v: FloatArray, hl: float, hw: float
-                           ) -> float:  # pragma: no cover - compiled
-    """Distance [m] between the rectangle ``|u| <= hl``, ``|v| <= hw`` and a polygon given
-    by its vertices ``u``, ``v`` ``(V,)`` in the rectangle's frame, 0 on overlap."""
-    m = len(u)
-    best = np.inf
-    crosses = False
-    winding = 0
-    meet = u.min() <= hl and u.max() >= -hl and v.min() <= hw and v.max() >= -hw
-    for a in range(m):
-        b = a + 1 if a + 1 < m else 0
-        # the vertex to the filled rectangle
-        gu, gv = max(abs(u[a]) - hl, 0.0), max(abs(v[a]) - hw, 0.0)
-        best = min(best, gu * gu + gv * gv)
-        # the rectangle's corners to the edge a-b
-        du, dv = u[b] - u[a], v[b] - v[a]
-        seg2 = du * du + dv * dv
-        inv = 1.0 / seg2 if seg2 > 0 else 1.0
-        for cu, cv in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw)):
-            wu, wv = cu - u[a], cv - v[a]
-            t = min(max((wu * du + wv * dv) * inv, 0.0), 1.0)
-            eu, ev = t * du - wu, t * dv - wv
-            best = min(best, eu * eu + ev * ev)
-        if not meet:
-            continue
-        # the edge crossing the rectangle (Liang-Barsky clipping)
-        t_in, t_out, ok = 0.0, 1.0, True
-        for p0, d, lim in ((u[a], du, hl), (v[a], dv, hw)):
-            if abs(d) < 1e-15:
-                ok = ok and abs(p0) <= lim
-            else:
-                t1, t2 = (-lim - p0) / d, (lim - p0) / d
-                t_in = max(t_in, min(t1, t2))
-                t_out = min(t_out, max(t1, t2))
-        crosses = crosses or (ok and t_in <= t_out)
-        # the rectangle's centre inside the polygon, by crossing number
-        if (v[a] > 0) != (v[b] > 0) and u[a] - v[a] * du / dv > 0:
-            winding += 1
-    if meet and (crosses or winding % 2 == 1):
-        return 0.0
-    return float(np.sqrt(best))

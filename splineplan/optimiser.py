@@ -13,14 +13,14 @@ from __future__ import annotations
 import itertools
 import logging
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from splineplan import kernels
 from splineplan.curvature import curvature_from_derivatives
-from splineplan.footprint import _Checker, _slack_kernel
+from splineplan.footprint import _Checker
 from splineplan.geometry import FloatArray
 from splineplan.trajectory_params import TrajectoryParams
 
@@ -377,13 +377,14 @@ class _Optimiser:
         were tried or ``patience`` rounds did not help; keeps the best curve seen.
 
         Each round makes the move of the slowest point and those of the slowest points of
-        other independent stretches (:func:`_independent`); a move is kept if the footprint
-        along its changed samples stays clear and their worst violation does not grow.
+        other independent stretches (:func:`splineplan.kernels.independent_moves`); a move
+        is kept if the footprint along its changed samples stays clear and their worst
+        violation does not grow.
         Returns the moves tried, accepted and refused, and the rounds.
         """
         p = self.params
         ch = self.checker
-        out = _run_kernel(
+        out = kernels.optimise(
             self.ctrl, self.pos, self.d1, self.d2, self.kappa, self.slack, self.station,
             np.ascontiguousarray(self.first, dtype=np.int64), np.ascontiguousarray(self.basis),
             self.lo.astype(np.int64), self.hi.astype(np.int64),
@@ -393,159 +394,3 @@ class _Optimiser:
         tried, accepted, refused, rounds = (int(v) for v in out)
         log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)
         return tried, accepted, refused, rounds
-
-
-@njit(cache=True)
-def _run_kernel(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
-                kappa: FloatArray, slack: FloatArray, station: FloatArray,
-                first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
-                hi: NDArray[np.int64], cand: NDArray[np.int64], movable: NDArray[np.bool_],
-                refused: NDArray[np.bool_], k: int, kappa_smax: float, kappa_max: float,
-                max_iterations: int, patience: int, checker: tuple[Any, ...]
-                ) -> tuple[int, int, int, int]:  # pragma: no cover - compiled
-    """:meth:`_Optimiser.run` on the optimiser's arrays, changed in place (the best curve
-    seen at the end); ``checker``: the footprint check's arrays and sizes, as
-    :func:`~splineplan.footprint._slack_kernel` takes them after the samples."""
-    n = len(ctrl)
-    tried = accepted = refused_count = rounds = 0
-    best_worst = kappa.max()
-    best = (ctrl.copy(), pos.copy(), d1.copy(), d2.copy(), kappa.copy(), slack.copy(),
-            station.copy())
-    idle = 0
-    bad = np.zeros(n)
-    while tried < max_iterations and idle < patience:
-        # for each slow sample, the first of its shaping control points (by Greville
-        # distance) that may move: not fixed, not refused since the last accepted move
-        # nearby, not already at its neighbours' mean; the worst sample per control point
-        eligible = movable & ~refused
-        for i in range(1, n - 1):
-            mx = ctrl[i, 0] - 0.5 * (ctrl[i - 1, 0] + ctrl[i + 1, 0])
-            my = ctrl[i, 1] - 0.5 * (ctrl[i - 1, 1] + ctrl[i + 1, 1])
-            if np.hypot(mx, my) < 1e-9:
-                eligible[i] = False
-        bad[:] = 0.0
-        any_slow = False
-        for j in range(len(kappa)):
-            if kappa[j] > kappa_smax * (1.0 + 1e-9):
-                any_slow = True
-                for c in cand[j]:
-                    if eligible[c]:
-                        bad[c] = max(bad[c], kappa[j])
-                        break
-        if not any_slow or not (bad > 0).any():
-            break
-        chosen = _independent(bad, k, max_iterations - tried)
-        rounds += 1
-        tried += len(chosen)
-        acc = _try_moves(chosen, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
-                         hi, kappa_max, checker)
-        n_acc = int(acc.sum())
-        accepted += n_acc
-        refused_count += len(chosen) - n_acc
-        for m in range(len(chosen)):
-            if not acc[m]:
-                refused[chosen[m]] = True
-        for m in range(len(chosen)):
-            if acc[m]:
-                refused[max(chosen[m] - k, 0):chosen[m] + k + 1] = False
-        worst = kappa.max()
-        if worst < best_worst - 1e-12 and n_acc > 0:
-            best_worst = worst
-            best = (ctrl.copy(), pos.copy(), d1.copy(), d2.copy(), kappa.copy(), slack.copy(),
-                    station.copy())
-            idle = 0
-        else:
-            idle += 1
-    if kappa.max() > best_worst + 1e-12:
-        ctrl[:] = best[0]
-        pos[:] = best[1]
-        d1[:] = best[2]
-        d2[:] = best[3]
-        kappa[:] = best[4]
-        slack[:] = best[5]
-        station[:] = best[6]
-    return tried, accepted, refused_count, rounds
-
-
-@njit(cache=True)
-def _try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
-               d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
-               first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
-               hi: NDArray[np.int64], kappa_max: float, checker: tuple[Any, ...]
-               ) -> NDArray[np.bool_]:  # pragma: no cover - compiled
-    """Try moving each control point in ``moves`` to its neighbours' mean; a move changes
-    the samples linearly (new = old + basis column * delta), so only its stretch is
-    re-evaluated. Kept, in place, if no clear sample of the stretch loses its clearance
-    and the stretch's worst curvature (beyond the limit) and footprint violation do not
-    grow. Returns which moves were kept."""
-    acc = np.zeros(len(moves), dtype=np.bool_)
-    for m in range(len(moves)):
-        i = moves[m]
-        dx = 0.5 * (ctrl[i - 1, 0] + ctrl[i + 1, 0]) - ctrl[i, 0]
-        dy = 0.5 * (ctrl[i - 1, 1] + ctrl[i + 1, 1]) - ctrl[i, 1]
-        a, b = lo[i], hi[i]
-        q = b - a
-        px, py = np.empty(q), np.empty(q)
-        e1, e2 = np.empty((q, 2)), np.empty((q, 2))
-        kap, head = np.empty(q), np.empty(q)
-        for t in range(q):
-            j = a + t
-            r = i - first[j]  # column of the moved point in the sample's row
-            px[t] = pos[j, 0] + basis[0, r, j] * dx
-            py[t] = pos[j, 1] + basis[0, r, j] * dy
-            e1[t, 0] = d1[j, 0] + basis[1, r, j] * dx
-            e1[t, 1] = d1[j, 1] + basis[1, r, j] * dy
-            e2[t, 0] = d2[j, 0] + basis[2, r, j] * dx
-            e2[t, 1] = d2[j, 1] + basis[2, r, j] * dy
-            kap[t] = abs(_curvature(e1[t, 0], e1[t, 1], e2[t, 0], e2[t, 1]))
-            head[t] = np.arctan2(e1[t, 1], e1[t, 0])
-        sl, sc = _slack_kernel(px, py, head, station[a:b].copy(), *checker)
-        worse = False
-        new_k = old_k = kappa_max
-        new_v = old_v = 0.0
-        for t in range(q):
-            j = a + t
-            if slack[j] >= 0 and sl[t] < 0:
-                worse = True
-            new_k, old_k = max(new_k, kap[t]), max(old_k, kappa[j])
-            new_v, old_v = max(new_v, -sl[t]), max(old_v, -slack[j])
-        if worse or new_k > old_k + 1e-12 or new_v > old_v + 1e-12:
-            continue
-        acc[m] = True
-        for t in range(q):
-            j = a + t
-            pos[j, 0], pos[j, 1] = px[t], py[t]
-            d1[j, 0], d1[j, 1] = e1[t, 0], e1[t, 1]
-            d2[j, 0], d2[j, 1] = e2[t, 0], e2[t, 1]
-            kappa[j], slack[j], station[j] = kap[t], sl[t], sc[t]
-        ctrl[i, 0] += dx
-        ctrl[i, 1] += dy
-    return acc
-
-
-@njit(cache=True)
-def _curvature(ax: float, ay: float, bx: float, by: float) -> float:  # pragma: no cover
-    """:func:`~splineplan.curvature.curvature_from_derivatives` of one sample."""
-    speed2 = ax * ax + ay * ay
-    if speed2 > 0:
-        return float((ax * by - ay * bx) / speed2**1.5)
-    return np.inf
-
-
-@njit(cache=True)
-def _independent(bad: FloatArray, k: int, budget: int
-                 ) -> NDArray[np.int64]:  # pragma: no cover - compiled
-    """Control points to move this round: the worst first, then others ``k + 1`` apart."""
-    order = np.argsort(-bad, kind="mergesort")  # stable: ties by index
-    taken = np.zeros(len(bad) + 2 * k + 2, dtype=np.bool_)  # offset by k: i - k >= 0
-    chosen = np.empty(min(len(bad), max(budget, 0)), dtype=np.int64)
-    count = 0
-    for i in order:
-        if bad[i] <= 0 or count >= budget:
-            break
-        if taken[i:i + 2 * k + 1].any():
-            continue
-        taken[i + k] = True
-        chosen[count] = i
-        count += 1
-    return chosen[:count]

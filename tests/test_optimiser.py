@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.interpolate import BSpline
 
-from splineplan.optimiser import _Curve, _independent
+from splineplan.kernels import independent_moves
+from splineplan.optimiser import _Curve
 
 
 @pytest.mark.parametrize("degree", [1, 2, 3, 4, 5])
@@ -31,12 +34,12 @@ def test_cached_basis_evaluates_like_scipy(degree: int) -> None:
 def test_independent_moves_are_worst_first_and_apart(bad_list: list[float], k: int,
                                                      budget: int) -> None:
     bad = np.asarray(bad_list)
-    chosen = _independent(bad, k, budget)
+    chosen = independent_moves(bad, k, budget)
     assert len(chosen) <= budget
     assert np.all(bad[chosen] > 0)
     # supports of control points more than k apart do not overlap
     taken = sorted(chosen.tolist())
-    assert all(b - a > k for a, b in zip(taken, taken[1:], strict=False))
+    assert all(b - a > k for a, b in itertools.pairwise(taken))
     # greedy: every positive point left out is within k of a chosen one that is at least
     # as bad, unless the budget ran out
     if len(chosen) < budget:

@@ -1,0 +1,417 @@
+"""Compiled inner loops of level 3: the footprint check and equation (3)'s rounds.
+
+Level 3 checks the vehicle's footprint a few thousand times per route on tens to hundreds
+of curve samples each; as array code it spent most of its time in the overhead of small
+numpy calls. These loops run over the samples one at a time, compiled with numba and
+cached on disk after the first run. The thin callers are
+:class:`splineplan.footprint._Checker` and :class:`splineplan.optimiser._Optimiser`.
+
+The kernels that call one another live in this one file on purpose: numba's on-disk cache
+is invalidated per file, so a kernel calling a kernel of another file would keep running
+the old code after that file changed.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+from splineplan.geometry import FloatArray
+
+
+@njit(cache=True)
+def upper(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
+    """``np.searchsorted(a, x, side="right")`` for a sorted ``a``."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def lower(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
+    """``np.searchsorted(a, x, side="left")`` for a sorted ``a``."""
+    lo, hi = 0, len(a)
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if a[mid] < x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def segment(st: FloatArray, s: float, guess: int = -1) -> int:  # pragma: no cover
+    """Reference segment holding station ``s`` (``st``: the vertices' stations), the end
+    segments beyond the ends: ``np.searchsorted(st[1:-1], s, side="right")``. From a
+    ``guess`` nearby, a few steps of walking; else a binary search."""
+    last = len(st) - 2
+    if 0 <= guess <= last:
+        i = guess
+        for _ in range(8):
+            if i > 0 and s < st[i]:
+                i -= 1
+            elif i < last and s >= st[i + 1]:
+                i += 1
+            else:
+                return i
+    return upper(st[1:-1], s)
+
+
+@njit(cache=True)
+def interp_near(x: float, xp: FloatArray, fp: FloatArray, guess: int) -> float:
+    """``np.interp`` at one point, searching from the interval ``guess`` nearby."""
+    n = len(xp)
+    if x <= xp[0]:
+        return float(fp[0])
+    if x >= xp[n - 1]:
+        return float(fp[n - 1])
+    k = segment(xp, x, guess)
+    return float((fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k]) * (x - xp[k]) + fp[k])
+
+
+@njit(cache=True)
+def road_one(x: float, y: float, h: float, sc: float, st: FloatArray, rx: FloatArray,
+             ry: FloatArray, hc: FloatArray, hs: FloatArray, left: FloatArray,
+             right: FloatArray, bu: FloatArray, bv: FloatArray, cs: FloatArray,
+             cx: FloatArray, cy: FloatArray, cside: FloatArray, hl: float, hw: float,
+             band: float, reach: float, guess: int
+             ) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """Footprint of one pose to the left and right road edges [m], and its station [m]
+    (see :meth:`splineplan.footprint._Checker.road`; ``guess``: a reference segment near
+    station ``sc``)."""
+    c, s = np.cos(h), np.sin(h)
+    i0 = segment(st, sc, guess)
+    to_left = to_right = np.inf
+    station = sc
+    for p in range(len(bu)):
+        px = (x + c * bu[p]) - s * bv[p]
+        py = (y + s * bu[p]) + c * bv[p]
+        est = st[i0] + ((px - rx[i0]) * hc[i0] + (py - ry[i0]) * hs[i0])
+        i = segment(st, est, i0)
+        dx, dy = px - rx[i], py - ry[i]
+        along = st[i] + dx * hc[i] + dy * hs[i]
+        lat = dy * hc[i] - dx * hs[i]
+        if p == len(bu) - 1:  # the centre
+            station = along
+        else:
+            to_left = min(to_left, interp_near(along, st, left, i) - lat)
+            to_right = min(to_right, lat - interp_near(along, st, right, i))
+    if min(to_left, to_right) < band:
+        # the edges' inward vertices near the centre's station, by rectangle-point distance
+        for k in range(lower(cs, station - reach), upper(cs, station + reach)):
+            dx, dy = cx[k] - x, cy[k] - y
+            gu = abs(dx * c + dy * s) - hl
+            gv = abs(dy * c - dx * s) - hw
+            inside = gu <= 0 and gv <= 0
+            d = max(gu, gv) if inside else np.hypot(max(gu, 0.0), max(gv, 0.0))
+            if cside[k] > 0:
+                to_left = min(to_left, d)
+            else:
+                to_right = min(to_right, d)
+    return to_left, to_right, station
+
+
+@njit(cache=True)
+def road_clearance(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray, st: FloatArray,
+                   rx: FloatArray, ry: FloatArray, hc: FloatArray, hs: FloatArray,
+                   left: FloatArray, right: FloatArray, bu: FloatArray, bv: FloatArray,
+                   cs: FloatArray, cx: FloatArray, cy: FloatArray, cside: FloatArray,
+                   hl: float, hw: float, margin: float, band: float, reach: float
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
+    """:meth:`splineplan.footprint._Checker.road` for each pose: to the left edge [m], to
+    the right [m], stations [m]."""
+    n = len(x)
+    to_left, to_right, station = np.empty(n), np.empty(n), np.empty(n)
+    i = -1  # the previous sample's segment: samples run along the curve
+    for j in range(n):
+        i = segment(st, sc[j], i)
+        to_left[j], to_right[j], station[j] = road_one(
+            x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left, right, bu, bv, cs, cx, cy,
+            cside, hl, hw, band, reach, i)
+    return to_left, to_right, station
+
+
+@njit(cache=True)
+def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
+                    st: FloatArray, rx: FloatArray, ry: FloatArray, hc: FloatArray,
+                    hs: FloatArray, left: FloatArray, right: FloatArray, bu: FloatArray,
+                    bv: FloatArray, cs: FloatArray, cx: FloatArray, cy: FloatArray,
+                    cside: FloatArray, hl: float, hw: float, margin: float, band: float,
+                    reach: float, lmin: FloatArray, rmax: FloatArray, turn: FloatArray,
+                    seg_heading: FloatArray, vx: FloatArray, vy: FloatArray,
+                    offsets: NDArray[np.int64], bbox: FloatArray
+                    ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """:meth:`splineplan.footprint._Checker.slack`: clearance beyond the margin [m] and
+    stations [m]."""
+    n = len(x)
+    road = np.empty(n)
+    station = np.empty(n)
+    i = -1  # the previous sample's segment: samples run along the curve
+    for j in range(n):
+        # the centre in the frame of the reference segment at its station (from the
+        # estimate, one step of refinement)
+        s_new = sc[j]
+        dx = dy = 0.0
+        for _ in range(2):
+            i = segment(st, s_new, i)
+            dx, dy = x[j] - rx[i], y[j] - ry[i]
+            s_new = st[i] + dx * hc[i] + dy * hs[i]
+        lat = dy * hc[i] - dx * hs[i]
+        # clearly on the road (a lower bound of the clearance is above the margin): no
+        # exact check of the footprint
+        dh = h[j] - seg_heading[i]
+        ext = (hl * abs(np.sin(dh)) + hw * abs(np.cos(dh))
+               + (abs(lat) + hl + hw) * turn[i] + 0.05)
+        r = min(lmin[i] - lat, lat - rmax[i]) - ext
+        if r < margin + 1e-6:
+            tl, tr, s_new = road_one(x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left,
+                                      right, bu, bv, cs, cx, cy, cside, hl, hw, band, reach,
+                                      i)
+            r = min(tl, tr)
+        road[j] = r
+        station[j] = s_new
+    near = obstacle_clearance(x, y, h, vx, vy, offsets, bbox, hl, hw, margin, 0.0, True)
+    return np.minimum(near, road) - margin, station
+
+
+@njit(cache=True)
+def obstacle_clearance(x: FloatArray, y: FloatArray, h: FloatArray, vx: FloatArray,
+                       vy: FloatArray, offsets: NDArray[np.int64], bbox: FloatArray,
+                       hl: float, hw: float, margin: float, horizon: float, cull: bool
+                       ) -> FloatArray:  # pragma: no cover - compiled
+    """:meth:`splineplan.footprint._Checker.obstacles`: each pose's footprint to the
+    nearest obstacle [m]."""
+    n = len(x)
+    out = np.full(n, np.inf)
+    k = len(offsets) - 1
+    if k == 0:
+        return out
+    r = np.hypot(hl, hw) + margin + horizon
+    gap = margin + horizon
+    u = np.empty(int(np.max(offsets[1:] - offsets[:-1])))
+    v = np.empty_like(u)
+    for j in range(n):
+        c, s = np.cos(h[j]), np.sin(h[j])
+        for o in range(k):
+            if not (bbox[o, 0] <= x[j] + r and bbox[o, 2] >= x[j] - r
+                    and bbox[o, 1] <= y[j] + r and bbox[o, 3] >= y[j] - r):
+                continue
+            a0, m = offsets[o], offsets[o + 1] - offsets[o]
+            for q in range(m):
+                ex, ey = vx[a0 + q] - x[j], vy[a0 + q] - y[j]
+                u[q] = ex * c + ey * s
+                v[q] = ey * c - ex * s
+            if cull and not (u[:m].min() < hl + gap and u[:m].max() > -hl - gap
+                             and v[:m].min() < hw + gap and v[:m].max() > -hw - gap):
+                continue
+            out[j] = min(out[j], rect_polygon_distance(u[:m], v[:m], hl, hw))
+    return out
+
+
+@njit(cache=True)
+def rect_polygon_distance(u: FloatArray, v: FloatArray, hl: float, hw: float
+                          ) -> float:  # pragma: no cover - compiled
+    """Distance [m] between the rectangle ``|u| <= hl``, ``|v| <= hw`` and a polygon given
+    by its vertices ``u``, ``v`` ``(V,)`` in the rectangle's frame, 0 on overlap."""
+    m = len(u)
+    best = np.inf
+    crosses = False
+    winding = 0
+    meet = u.min() <= hl and u.max() >= -hl and v.min() <= hw and v.max() >= -hw
+    for a in range(m):
+        b = a + 1 if a + 1 < m else 0
+        # the vertex to the filled rectangle
+        gu, gv = max(abs(u[a]) - hl, 0.0), max(abs(v[a]) - hw, 0.0)
+        best = min(best, gu * gu + gv * gv)
+        # the rectangle's corners to the edge a-b
+        du, dv = u[b] - u[a], v[b] - v[a]
+        seg2 = du * du + dv * dv
+        inv = 1.0 / seg2 if seg2 > 0 else 1.0
+        for cu, cv in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw)):
+            wu, wv = cu - u[a], cv - v[a]
+            t = min(max((wu * du + wv * dv) * inv, 0.0), 1.0)
+            eu, ev = t * du - wu, t * dv - wv
+            best = min(best, eu * eu + ev * ev)
+        if not meet:
+            continue
+        # the edge crossing the rectangle (Liang-Barsky clipping)
+        t_in, t_out, ok = 0.0, 1.0, True
+        for p0, d, lim in ((u[a], du, hl), (v[a], dv, hw)):
+            if abs(d) < 1e-15:
+                ok = ok and abs(p0) <= lim
+            else:
+                t1, t2 = (-lim - p0) / d, (lim - p0) / d
+                t_in = max(t_in, min(t1, t2))
+                t_out = min(t_out, max(t1, t2))
+        crosses = crosses or (ok and t_in <= t_out)
+        # the rectangle's centre inside the polygon, by crossing number
+        if (v[a] > 0) != (v[b] > 0) and u[a] - v[a] * du / dv > 0:
+            winding += 1
+    if meet and (crosses or winding % 2 == 1):
+        return 0.0
+    return float(np.sqrt(best))
+
+
+@njit(cache=True)
+def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
+             kappa: FloatArray, slack: FloatArray, station: FloatArray,
+             first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
+             hi: NDArray[np.int64], cand: NDArray[np.int64], movable: NDArray[np.bool_],
+             refused: NDArray[np.bool_], k: int, kappa_smax: float, kappa_max: float,
+             max_iterations: int, patience: int, checker: tuple[Any, ...]
+             ) -> tuple[int, int, int, int]:  # pragma: no cover - compiled
+    """:meth:`splineplan.optimiser._Optimiser.run` on the optimiser's arrays, changed in
+    place (the best curve seen at the end); ``checker``: the footprint check's arrays and
+    sizes, as :func:`footprint_slack` takes them after the samples."""
+    n = len(ctrl)
+    tried = accepted = refused_count = rounds = 0
+    best_worst = kappa.max()
+    best = (ctrl.copy(), pos.copy(), d1.copy(), d2.copy(), kappa.copy(), slack.copy(),
+            station.copy())
+    idle = 0
+    bad = np.zeros(n)
+    while tried < max_iterations and idle < patience:
+        # for each slow sample, the first of its shaping control points (by Greville
+        # distance) that may move: not fixed, not refused since the last accepted move
+        # nearby, not already at its neighbours' mean; the worst sample per control point
+        eligible = movable & ~refused
+        for i in range(1, n - 1):
+            mx = ctrl[i, 0] - 0.5 * (ctrl[i - 1, 0] + ctrl[i + 1, 0])
+            my = ctrl[i, 1] - 0.5 * (ctrl[i - 1, 1] + ctrl[i + 1, 1])
+            if np.hypot(mx, my) < 1e-9:
+                eligible[i] = False
+        bad[:] = 0.0
+        any_slow = False
+        for j in range(len(kappa)):
+            if kappa[j] > kappa_smax * (1.0 + 1e-9):
+                any_slow = True
+                for c in cand[j]:
+                    if eligible[c]:
+                        bad[c] = max(bad[c], kappa[j])
+                        break
+        if not any_slow or not (bad > 0).any():
+            break
+        chosen = independent_moves(bad, k, max_iterations - tried)
+        rounds += 1
+        tried += len(chosen)
+        acc = try_moves(chosen, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
+                         hi, kappa_max, checker)
+        n_acc = int(acc.sum())
+        accepted += n_acc
+        refused_count += len(chosen) - n_acc
+        for m in range(len(chosen)):
+            if not acc[m]:
+                refused[chosen[m]] = True
+        for m in range(len(chosen)):
+            if acc[m]:
+                refused[max(chosen[m] - k, 0):chosen[m] + k + 1] = False
+        worst = kappa.max()
+        if worst < best_worst - 1e-12 and n_acc > 0:
+            best_worst = worst
+            best = (ctrl.copy(), pos.copy(), d1.copy(), d2.copy(), kappa.copy(), slack.copy(),
+                    station.copy())
+            idle = 0
+        else:
+            idle += 1
+    if kappa.max() > best_worst + 1e-12:
+        ctrl[:] = best[0]
+        pos[:] = best[1]
+        d1[:] = best[2]
+        d2[:] = best[3]
+        kappa[:] = best[4]
+        slack[:] = best[5]
+        station[:] = best[6]
+    return tried, accepted, refused_count, rounds
+
+
+@njit(cache=True)
+def try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
+              d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
+              first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
+              hi: NDArray[np.int64], kappa_max: float, checker: tuple[Any, ...]
+              ) -> NDArray[np.bool_]:  # pragma: no cover - compiled
+    """Try moving each control point in ``moves`` to its neighbours' mean; a move changes
+    the samples linearly (new = old + basis column * delta), so only its stretch is
+    re-evaluated. Kept, in place, if no clear sample of the stretch loses its clearance
+    and the stretch's worst curvature (beyond the limit) and footprint violation do not
+    grow. Returns which moves were kept."""
+    acc = np.zeros(len(moves), dtype=np.bool_)
+    for m in range(len(moves)):
+        i = moves[m]
+        dx = 0.5 * (ctrl[i - 1, 0] + ctrl[i + 1, 0]) - ctrl[i, 0]
+        dy = 0.5 * (ctrl[i - 1, 1] + ctrl[i + 1, 1]) - ctrl[i, 1]
+        a, b = lo[i], hi[i]
+        q = b - a
+        px, py = np.empty(q), np.empty(q)
+        e1, e2 = np.empty((q, 2)), np.empty((q, 2))
+        kap, head = np.empty(q), np.empty(q)
+        for t in range(q):
+            j = a + t
+            r = i - first[j]  # column of the moved point in the sample's row
+            px[t] = pos[j, 0] + basis[0, r, j] * dx
+            py[t] = pos[j, 1] + basis[0, r, j] * dy
+            e1[t, 0] = d1[j, 0] + basis[1, r, j] * dx
+            e1[t, 1] = d1[j, 1] + basis[1, r, j] * dy
+            e2[t, 0] = d2[j, 0] + basis[2, r, j] * dx
+            e2[t, 1] = d2[j, 1] + basis[2, r, j] * dy
+            kap[t] = abs(curvature(e1[t, 0], e1[t, 1], e2[t, 0], e2[t, 1]))
+            head[t] = np.arctan2(e1[t, 1], e1[t, 0])
+        sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
+        worse = False
+        new_k = old_k = kappa_max
+        new_v = old_v = 0.0
+        for t in range(q):
+            j = a + t
+            if slack[j] >= 0 and sl[t] < 0:
+                worse = True
+            new_k, old_k = max(new_k, kap[t]), max(old_k, kappa[j])
+            new_v, old_v = max(new_v, -sl[t]), max(old_v, -slack[j])
+        if worse or new_k > old_k + 1e-12 or new_v > old_v + 1e-12:
+            continue
+        acc[m] = True
+        for t in range(q):
+            j = a + t
+            pos[j, 0], pos[j, 1] = px[t], py[t]
+            d1[j, 0], d1[j, 1] = e1[t, 0], e1[t, 1]
+            d2[j, 0], d2[j, 1] = e2[t, 0], e2[t, 1]
+            kappa[j], slack[j], station[j] = kap[t], sl[t], sc[t]
+        ctrl[i, 0] += dx
+        ctrl[i, 1] += dy
+    return acc
+
+
+@njit(cache=True)
+def curvature(ax: float, ay: float, bx: float, by: float) -> float:  # pragma: no cover
+    """:func:`splineplan.curvature.curvature_from_derivatives` of one sample."""
+    speed2 = ax * ax + ay * ay
+    if speed2 > 0:
+        return float((ax * by - ay * bx) / speed2**1.5)
+    return np.inf
+
+
+@njit(cache=True)
+def independent_moves(bad: FloatArray, k: int, budget: int
+                      ) -> NDArray[np.int64]:  # pragma: no cover - compiled
+    """Control points to move this round: the worst first, then others ``k + 1`` apart."""
+    order = np.argsort(-bad, kind="mergesort")  # stable: ties by index
+    taken = np.zeros(len(bad) + 2 * k + 2, dtype=np.bool_)  # offset by k: i - k >= 0
+    chosen = np.empty(min(len(bad), max(budget, 0)), dtype=np.int64)
+    count = 0
+    for i in order:
+        if bad[i] <= 0 or count >= budget:
+            break
+        if taken[i:i + 2 * k + 1].any():
+            continue
+        taken[i + k] = True
+        chosen[count] = i
+        count += 1
+    return chosen[:count]
