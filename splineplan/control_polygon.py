@@ -15,6 +15,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import Corridor
@@ -169,10 +170,9 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     Equation (3) moves a point to its neighbours' mean, which drives exactly this sum down;
     this is its fixed point within the bands, found at once: the Hessian is banded
     (pentadiagonal), solved by banded Cholesky, first in a primal-dual active-set loop
-    (fast, usually exact), then in a primal active-set loop that ends at the optimum.
+    (fast, usually exact), then in a primal active-set loop that ends at the optimum (both
+    compiled: :func:`_min_bending_loops`).
     """
-    from scipy.linalg import solveh_banded
-
     m = len(origin)
     if m < 3:
         return np.clip(centre, lo, hi)
@@ -201,68 +201,167 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     dt[2:] += coef[:, 2, None] * second
     g = np.einsum("ij,ij->i", normal, dt) - weight * centre
 
-    def hess(x: FloatArray) -> FloatArray:
-        y = h0 * x
-        y[:-1] += h1 * x[1:]
-        y[1:] += h1 * x[:-1]
-        y[:-2] += h2 * x[2:]
-        y[2:] += h2 * x[:-2]
-        return y
-
-    fixed = lo >= hi
-
-    def solve(at_lo: NDArray[np.bool_], at_hi: NDArray[np.bool_]) -> FloatArray:
-        """Minimum with the offsets in ``at_lo`` / ``at_hi`` held at those bounds (by a
-        stiff penalty, which keeps the system banded)."""
-        act = at_lo | at_hi
-        ab = np.zeros((3, m))
-        ab[2] = h0 + _PIN * act
-        ab[1, 1:] = h1
-        ab[0, 2:] = h2
-        rhs = -g + _PIN * np.where(at_lo, lo, np.where(at_hi, hi, 0.0))
-        return solveh_banded(ab, rhs, lower=False, check_finite=False)
-
-    # primal-dual active set: fast, usually exact, but not guaranteed to settle
-    at_lo = np.zeros(m, dtype=bool)
-    at_hi = fixed.copy()
-    for _ in range(max_rounds):
-        x = solve(at_lo, at_hi)
-        grad = hess(x) + g
-        new_lo = ((at_lo & (grad >= 0)) | (x < lo - 1e-9)) & ~fixed
-        new_hi = ((at_hi & (grad <= 0)) | (x > hi + 1e-9)) & ~new_lo | fixed
-        if np.array_equal(new_lo, at_lo) and np.array_equal(new_hi, at_hi):
-            break
-        at_lo, at_hi = new_lo, new_hi
-    # primal active set from there: each step stays within the bounds and lowers the
-    # objective, so it ends at the optimum
-    x = np.clip(x, lo, hi)
-    at_lo = (x <= lo) & ~fixed
-    at_hi = (x >= hi) | fixed
-    for _ in range(4 * m + 10):
-        y = solve(at_lo, at_hi)
-        free = ~(at_lo | at_hi)
-        out = free & ((y < lo) | (y > hi))
-        if not out.any():
-            x = np.where(free, y, x)
-            grad = hess(x) + g
-            wrong = np.where(at_lo, -grad, 0.0) + np.where(at_hi & ~fixed, grad, 0.0)
-            i = int(np.argmax(wrong))
-            if wrong[i] <= 1e-9 * (1.0 + float(np.abs(grad).max())):
-                break
-            at_lo[i] = at_hi[i] = False
-            continue
-        d = y - x
-        with np.errstate(divide="ignore", invalid="ignore"):
-            room = np.where(d < 0, (lo - x) / d, np.where(d > 0, (hi - x) / d, np.inf))
-        room = np.where(free, np.clip(room, 0.0, None), np.inf)
-        j = int(np.argmin(room))
-        x = np.where(free, x + min(float(room[j]), 1.0) * d, x)
-        at_lo[j], at_hi[j] = d[j] < 0, d[j] > 0
-    return np.clip(x, lo, hi)
+    x, ok = _min_bending_loops(h0, h1, h2, g, np.ascontiguousarray(lo, dtype=float),
+                               np.ascontiguousarray(hi, dtype=float), max_rounds)
+    if not ok:
+        raise np.linalg.LinAlgError("the least-bending system is not positive definite")
+    return x
 
 
 #: Stiffness that holds an offset at its bound in :func:`min_bending_offsets`.
 _PIN = 1e8
+
+
+@njit(cache=True)
+def _hess(h0: FloatArray, h1: FloatArray, h2: FloatArray, x: FloatArray
+          ) -> FloatArray:  # pragma: no cover - compiled
+    """The pentadiagonal matrix (diagonal ``h0``, first and second off-diagonals ``h1``,
+    ``h2``) times ``x``."""
+    m = len(x)
+    y = h0 * x
+    for k in range(m - 1):
+        y[k] += h1[k] * x[k + 1]
+    for k in range(m - 1):
+        y[k + 1] += h1[k] * x[k]
+    for k in range(m - 2):
+        y[k] += h2[k] * x[k + 2]
+    for k in range(m - 2):
+        y[k + 2] += h2[k] * x[k]
+    return y
+
+
+@njit(cache=True)
+def _pinned_solve(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatArray,
+                  lo: FloatArray, hi: FloatArray, at_lo: NDArray[np.bool_],
+                  at_hi: NDArray[np.bool_]) -> tuple[FloatArray, bool]:  # pragma: no cover
+    """Minimum of ``x H x / 2 + g x`` with the offsets in ``at_lo`` / ``at_hi`` held at those
+    bounds by a stiff penalty (:data:`_PIN`), by Cholesky factorisation ``U^T U`` of the
+    pentadiagonal system; ``False`` if it is not positive definite."""
+    m = len(h0)
+    d = np.empty(m)
+    u1 = np.zeros(m)
+    u2 = np.zeros(m)
+    y = np.empty(m)
+    for j in range(m):
+        pinned = at_lo[j] or at_hi[j]
+        a = h0[j] + _PIN if pinned else h0[j]
+        b = -g[j]
+        if at_lo[j]:
+            b += _PIN * lo[j]
+        elif at_hi[j]:
+            b += _PIN * hi[j]
+        if j >= 1:
+            a -= u1[j - 1] * u1[j - 1]
+            b -= u1[j - 1] * y[j - 1]
+        if j >= 2:
+            a -= u2[j - 2] * u2[j - 2]
+            b -= u2[j - 2] * y[j - 2]
+        if not a > 0.0:
+            return y, False
+        d[j] = np.sqrt(a)
+        y[j] = b / d[j]
+        if j + 1 < m:
+            c = h1[j]
+            if j >= 1:
+                c -= u1[j - 1] * u2[j - 1]
+            u1[j] = c / d[j]
+        if j + 2 < m:
+            u2[j] = h2[j] / d[j]
+    x = np.empty(m)
+    for j in range(m - 1, -1, -1):
+        v = y[j]
+        if j + 1 < m:
+            v -= u1[j] * x[j + 1]
+        if j + 2 < m:
+            v -= u2[j] * x[j + 2]
+        x[j] = v / d[j]
+    return x, True
+
+
+@njit(cache=True)
+def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatArray,
+                       lo: FloatArray, hi: FloatArray, max_rounds: int
+                       ) -> tuple[FloatArray, bool]:  # pragma: no cover - compiled
+    """The active-set loops of :func:`min_bending_offsets` on its pentadiagonal Hessian
+    (``h0``, ``h1``, ``h2``) and gradient at zero ``g``: the offsets and whether every
+    system was positive definite."""
+    m = len(h0)
+    fixed = lo >= hi
+    # primal-dual active set: fast, usually exact, but not guaranteed to settle
+    at_lo = np.zeros(m, dtype=np.bool_)
+    at_hi = fixed.copy()
+    x = np.zeros(m)
+    for _ in range(max_rounds):
+        x, ok = _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi)
+        if not ok:
+            return x, False
+        grad = _hess(h0, h1, h2, x) + g
+        same = True
+        for k in range(m):
+            new_lo = ((at_lo[k] and grad[k] >= 0) or x[k] < lo[k] - 1e-9) and not fixed[k]
+            new_hi = (((at_hi[k] and grad[k] <= 0) or x[k] > hi[k] + 1e-9) and not new_lo
+                      ) or fixed[k]
+            if new_lo != at_lo[k] or new_hi != at_hi[k]:
+                same = False
+            at_lo[k], at_hi[k] = new_lo, new_hi
+        if same:
+            break
+    # primal active set from there: each step stays within the bounds and lowers the
+    # objective, so it ends at the optimum
+    for k in range(m):
+        x[k] = min(max(x[k], lo[k]), hi[k])
+        at_lo[k] = x[k] <= lo[k] and not fixed[k]
+        at_hi[k] = x[k] >= hi[k] or fixed[k]
+    for _ in range(4 * m + 10):
+        y, ok = _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi)
+        if not ok:
+            return x, False
+        out = False
+        for k in range(m):
+            if not (at_lo[k] or at_hi[k]) and (y[k] < lo[k] or y[k] > hi[k]):
+                out = True
+                break
+        if not out:
+            for k in range(m):
+                if not (at_lo[k] or at_hi[k]):
+                    x[k] = y[k]
+            grad = _hess(h0, h1, h2, x) + g
+            i, worst, big = 0, -np.inf, 0.0
+            for k in range(m):
+                w = 0.0
+                if at_lo[k]:
+                    w += -grad[k]
+                if at_hi[k] and not fixed[k]:
+                    w += grad[k]
+                if w > worst:
+                    i, worst = k, w
+                big = max(big, abs(grad[k]))
+            if worst <= 1e-9 * (1.0 + big):
+                break
+            at_lo[i] = at_hi[i] = False
+            continue
+        j, room_j = 0, np.inf
+        for k in range(m):
+            if at_lo[k] or at_hi[k]:
+                continue
+            dk = y[k] - x[k]
+            if dk < 0:
+                r = max((lo[k] - x[k]) / dk, 0.0)
+            elif dk > 0:
+                r = max((hi[k] - x[k]) / dk, 0.0)
+            else:
+                r = np.inf
+            if r < room_j:
+                j, room_j = k, r
+        t = min(room_j, 1.0)
+        dj = y[j] - x[j]
+        for k in range(m):
+            if not (at_lo[k] or at_hi[k]):
+                x[k] = x[k] + t * (y[k] - x[k])
+        at_lo[j], at_hi[j] = dj < 0, dj > 0
+    for k in range(m):
+        x[k] = min(max(x[k], lo[k]), hi[k])
+    return x, True
 
 
 def _leg_splits(length: float, before: float, after: float, cap: float, ratio: float
@@ -348,79 +447,87 @@ def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, norm
     m = len(pts)
     if m <= 2:
         return np.arange(m, dtype=np.int64)
-    kept = [0]
-    i = 0
     ends = _band_ends(pts, org, nrm, cen, hlf)
-    while i < m - 1:
-        i = _farthest(pts[i], i, m - 1, pts, org, tan, nrm, cen, hlf, ends=ends)
-        kept.append(i)
-    return np.asarray(kept, dtype=np.int64)
+    return _band_simplify_loop(ends, np.ascontiguousarray(org), np.ascontiguousarray(tan),
+                               _TOL)
+
+
+#: Angular tolerance [rad] of band simplification's test.
+_TOL = 1e-9
 
 
 def _farthest(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
-              tangent: FloatArray, normal: FloatArray, centre: FloatArray, half: FloatArray,
-              tol: float = 1e-9, ends: FloatArray | None = None) -> int:
+              tangent: FloatArray, normal: FloatArray, centre: FloatArray, half: FloatArray
+              ) -> int:
     """Largest ``j`` in ``(i, cap]`` (at least ``i + 1``) such that every segment
-    ``p -> pts[j']``, ``i < j' <= j``, crosses the lines ``i < k < j'`` inside their bands.
-
-    The rays from ``p`` that meet band ``k`` form the angle between its two ends (seen
-    from ``p``, relative to the road's direction at ``k``); a segment ``p -> pts[j]``
-    crosses every band before ``j`` if its direction lies in all their angles (running
-    maximum of the lower and minimum of the upper ends), and reaches each line ``k < j``
-    as the lines do not cross.
-    """
+    ``p -> pts[j']``, ``i < j' <= j``, crosses the lines ``i < k < j'`` inside their bands
+    (:func:`_farthest_from`)."""
     if cap <= i + 1:
         return min(i + 1, len(pts) - 1)
-    # the test is a running one: a window of candidates gives the same answer as all of
-    # them unless every candidate in it passes, then a window four times as long
-    window = 32
-    if ends is None:
-        ends = _band_ends(pts, origin, normal, centre, half)
-    while True:
-        end = min(cap, i + window)
-        j = _farthest_upto(p, i, end, pts, origin, tangent, normal, centre, half, tol, ends)
-        if j < end or end == cap:
-            return j
-        window *= 4
+    ends = _band_ends(pts, origin, normal, centre, half)
+    return _farthest_from(float(p[0]), float(p[1]), i, cap, ends,
+                          np.ascontiguousarray(origin, dtype=float),
+                          np.ascontiguousarray(tangent, dtype=float), _TOL)
 
 
 def _band_ends(pts: FloatArray, origin: FloatArray, normal: FloatArray, centre: FloatArray,
                half: FloatArray) -> FloatArray:
     """Per vertex ``(m, 3, 2)``: the lower and the upper end of its band, and the vertex."""
-    return np.stack((origin + (centre - half)[:, None] * normal,
-                     origin + (centre + half)[:, None] * normal, pts), axis=1)
+    return np.ascontiguousarray(
+        np.stack((origin + (centre - half)[:, None] * normal,
+                  origin + (centre + half)[:, None] * normal, pts), axis=1), dtype=float)
 
 
-def _farthest_upto(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
-                   tangent: FloatArray, normal: FloatArray, centre: FloatArray,
-                   half: FloatArray, tol: float, ends: FloatArray | None = None) -> int:
-    """:func:`_farthest` over all candidates ``(i, cap]`` at once (``ends``: the
-    :func:`_band_ends` of all vertices, computed here if ``None``)."""
-    ks = slice(i + 1, cap + 1)
-    ref = tangent[i + 1] if i + 1 < len(tangent) else tangent[-1]
-    c, s = ref[0], ref[1]
-    if ends is None:
-        ends = _band_ends(pts, origin, normal, centre, half)
-    # directions (relative to the road's) from p to both band ends and to the vertex
-    q = ends[ks]
-    dx, dy = q[..., 0] - p[0], q[..., 1] - p[1]
-    ang = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
-    a1, a2, th = ang[:, 0], ang[:, 1], ang[:, 2]
-    lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
-    # a line through p itself does not constrain the direction
-    o, t = origin[ks], tangent[ks]
-    on = np.abs((o[:, 0] - p[0]) * t[:, 0] + (o[:, 1] - p[1]) * t[:, 1]) < 1e-9
-    lo[on], hi[on] = -np.inf, np.inf
-    # bounds from the lines strictly before each candidate
-    low, high = np.empty(len(lo)), np.empty(len(hi))
-    low[0], high[0] = -np.inf, np.inf
-    np.maximum.accumulate(lo[:-1], out=low[1:])
-    np.minimum.accumulate(hi[:-1], out=high[1:])
-    good = (th >= low - tol) & (th <= high + tol)
-    good[0] = True
-    if good.all():
-        return cap
-    return int(i + np.argmin(good))
+@njit(cache=True)
+def _farthest_from(px: float, py: float, i: int, cap: int, ends: FloatArray,
+                   origin: FloatArray, tangent: FloatArray, tol: float
+                   ) -> int:  # pragma: no cover - compiled
+    """Largest ``j`` in ``(i, cap]`` (at least ``i + 1``) such that every segment from
+    ``(px, py)`` to vertex ``j' <= j`` crosses the lines ``i < k < j'`` inside their bands
+    (``ends``: :func:`_band_ends`).
+
+    The rays from the point that meet band ``k`` form the angle between its two ends (seen
+    from the point, relative to the road's direction at ``i + 1``); a segment to vertex
+    ``j`` crosses every band before ``j`` if its direction lies in all their angles (running
+    maximum of the lower and minimum of the upper ends, within ``tol`` [rad]), and reaches
+    each line ``k < j`` as the lines do not cross. A line through the point itself does
+    not constrain the direction.
+    """
+    m = len(ends)
+    if cap <= i + 1:
+        return min(i + 1, m - 1)
+    ref = i + 1 if i + 1 < m else m - 1
+    c, s = tangent[ref, 0], tangent[ref, 1]
+    low, high = -np.inf, np.inf
+    for k in range(i + 1, cap + 1):
+        dx, dy = ends[k, 2, 0] - px, ends[k, 2, 1] - py
+        th = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+        if k > i + 1 and not (th >= low - tol and th <= high + tol):
+            return k - 1
+        if abs((origin[k, 0] - px) * tangent[k, 0] + (origin[k, 1] - py) * tangent[k, 1]) < 1e-9:
+            continue
+        dx, dy = ends[k, 0, 0] - px, ends[k, 0, 1] - py
+        a1 = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+        dx, dy = ends[k, 1, 0] - px, ends[k, 1, 1] - py
+        a2 = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+        low = max(low, min(a1, a2))
+        high = min(high, max(a1, a2))
+    return cap
+
+
+@njit(cache=True)
+def _band_simplify_loop(ends: FloatArray, origin: FloatArray, tangent: FloatArray, tol: float
+                        ) -> NDArray[np.int64]:  # pragma: no cover - compiled
+    """The vertices that :func:`band_simplify` keeps (``ends``: :func:`_band_ends`)."""
+    m = len(ends)
+    kept = np.empty(m, dtype=np.int64)
+    kept[0] = 0
+    n, i = 1, 0
+    while i < m - 1:
+        i = _farthest_from(ends[i, 2, 0], ends[i, 2, 1], i, m - 1, ends, origin, tangent, tol)
+        kept[n] = i
+        n += 1
+    return kept[:n].copy()
 
 
 # ---- detour ----------------------------------------------------------------------------

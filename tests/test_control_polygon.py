@@ -1,0 +1,206 @@
+"""The compiled loops of :mod:`splineplan.control_polygon` against their array formulas."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.linalg import solveh_banded
+
+from splineplan.control_polygon import (
+    _PIN,
+    _farthest,
+    band_simplify,
+    min_bending_offsets,
+)
+
+
+def farthest_reference(p: np.ndarray, i: int, cap: int, pts: np.ndarray, origin: np.ndarray,
+                       tangent: np.ndarray, normal: np.ndarray, centre: np.ndarray,
+                       half: np.ndarray, tol: float = 1e-9) -> int:
+    """The string-pulling test over all candidates ``(i, cap]`` at once, in array code."""
+    if cap <= i + 1:
+        return min(i + 1, len(pts) - 1)
+    ks = slice(i + 1, cap + 1)
+    ref = tangent[i + 1] if i + 1 < len(tangent) else tangent[-1]
+    c, s = ref[0], ref[1]
+    ends = np.stack((origin + (centre - half)[:, None] * normal,
+                     origin + (centre + half)[:, None] * normal, pts), axis=1)
+    q = ends[ks]
+    dx, dy = q[..., 0] - p[0], q[..., 1] - p[1]
+    ang = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+    a1, a2, th = ang[:, 0], ang[:, 1], ang[:, 2]
+    lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
+    o, t = origin[ks], tangent[ks]
+    on = np.abs((o[:, 0] - p[0]) * t[:, 0] + (o[:, 1] - p[1]) * t[:, 1]) < 1e-9
+    lo[on], hi[on] = -np.inf, np.inf
+    low, high = np.empty(len(lo)), np.empty(len(hi))
+    low[0], high[0] = -np.inf, np.inf
+    np.maximum.accumulate(lo[:-1], out=low[1:])
+    np.minimum.accumulate(hi[:-1], out=high[1:])
+    good = (th >= low - tol) & (th <= high + tol)
+    good[0] = True
+    if good.all():
+        return cap
+    return int(i + np.argmin(good))
+
+
+def band_simplify_reference(pts: np.ndarray, origin: np.ndarray, tangent: np.ndarray,
+                            normal: np.ndarray, centre: np.ndarray, half: np.ndarray
+                            ) -> np.ndarray:
+    """Greedy string pulling, one :func:`farthest_reference` after the other."""
+    m = len(pts)
+    if m <= 2:
+        return np.arange(m)
+    kept, i = [0], 0
+    while i < m - 1:
+        i = farthest_reference(pts[i], i, m - 1, pts, origin, tangent, normal, centre, half)
+        kept.append(i)
+    return np.asarray(kept)
+
+
+def random_bands(rng: np.random.Generator, m: int, width: float
+                 ) -> tuple[np.ndarray, ...]:
+    """Sweep lines along a winding road, with vertices inside bands of random width (some
+    zero, some vertices on a straight stretch, so that exact collinearity occurs)."""
+    turn = rng.normal(0.0, 0.05, m) * (rng.random(m) < 0.7)
+    heading = np.cumsum(turn)
+    step = np.where(rng.random(m) < 0.5, 1.0, rng.uniform(0.2, 2.0, m))
+    origin = np.column_stack((np.cumsum(step * np.cos(heading)),
+                              np.cumsum(step * np.sin(heading))))
+    tangent = np.column_stack((np.cos(heading), np.sin(heading)))
+    normal = np.column_stack((-tangent[:, 1], tangent[:, 0]))
+    centre = np.where(rng.random(m) < 0.3, 0.0, rng.uniform(-width, width, m))
+    half = np.where(rng.random(m) < 0.3, 0.0, rng.uniform(0.0, width, m))
+    lat = centre + rng.uniform(-1.0, 1.0, m) * half
+    pts = origin + lat[:, None] * normal
+    return pts, origin, tangent, normal, centre, half
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(1, 120),
+       width=st.sampled_from([0.0, 0.05, 0.5, 2.0]))
+def test_band_simplify_matches_array_formula(seed: int, m: int, width: float) -> None:
+    rng = np.random.default_rng(seed)
+    args = random_bands(rng, m, width)
+    got = band_simplify(*args)
+    assert got.dtype == np.int64
+    np.testing.assert_array_equal(got, band_simplify_reference(*args))
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(2, 120),
+       width=st.sampled_from([0.0, 0.5, 2.0]))
+def test_farthest_from_a_point_off_the_vertices(seed: int, m: int, width: float) -> None:
+    """From the vehicle's position (``i = -1``) and from vertices, up to random caps."""
+    rng = np.random.default_rng(seed)
+    pts, origin, tangent, normal, centre, half = random_bands(rng, m, width)
+    start = origin[0] - 2.0 * tangent[0] + rng.uniform(-1.0, 1.0) * normal[0]
+    for i in (-1, *rng.integers(0, m, 3).tolist()):
+        p = start if i < 0 else pts[i]
+        cap = int(rng.integers(i + 1, m)) if i + 1 < m else m - 1
+        assert (_farthest(p, i, cap, pts, origin, tangent, normal, centre, half)
+                == farthest_reference(p, i, cap, pts, origin, tangent, normal, centre, half))
+
+
+def min_bending_reference(origin: np.ndarray, normal: np.ndarray, lo: np.ndarray,
+                          hi: np.ndarray, centre: np.ndarray, weight: float,
+                          max_rounds: int = 30) -> np.ndarray:
+    """The active-set loops in array code, each system solved by scipy's banded Cholesky."""
+    m = len(origin)
+    if m < 3:
+        return np.clip(centre, lo, hi)
+    h = np.maximum(np.hypot(*np.diff(origin, axis=0).T), 1e-3)
+    w = np.sqrt(2.0 / (h[:-1] + h[1:]))
+    coef = np.column_stack((w / h[:-1], -w * (1.0 / h[:-1] + 1.0 / h[1:]), w / h[1:]))
+    m0, m1 = np.zeros(m), np.zeros(m - 1)
+    for a in range(3):
+        m0[a:m - 2 + a] += coef[:, a] ** 2
+    for a in range(2):
+        m1[a:m - 2 + a] += coef[:, a] * coef[:, a + 1]
+    m2 = coef[:, 0] * coef[:, 2]
+    nn1 = np.einsum("ij,ij->i", normal[:-1], normal[1:])
+    nn2 = np.einsum("ij,ij->i", normal[:-2], normal[2:])
+    n0 = np.einsum("ij,ij->i", normal, normal)
+    h0, h1, h2 = m0 * n0 + weight + 1e-9, m1 * nn1, m2 * nn2
+    second = (coef[:, 0, None] * origin[:-2] + coef[:, 1, None] * origin[1:-1]
+              + coef[:, 2, None] * origin[2:])
+    dt = np.zeros((m, 2))
+    dt[:-2] += coef[:, 0, None] * second
+    dt[1:-1] += coef[:, 1, None] * second
+    dt[2:] += coef[:, 2, None] * second
+    g = np.einsum("ij,ij->i", normal, dt) - weight * centre
+
+    def hess(x: np.ndarray) -> np.ndarray:
+        y = h0 * x
+        y[:-1] += h1 * x[1:]
+        y[1:] += h1 * x[:-1]
+        y[:-2] += h2 * x[2:]
+        y[2:] += h2 * x[:-2]
+        return y
+
+    fixed = lo >= hi
+
+    def solve(at_lo: np.ndarray, at_hi: np.ndarray) -> np.ndarray:
+        ab = np.zeros((3, m))
+        ab[2] = h0 + _PIN * (at_lo | at_hi)
+        ab[1, 1:] = h1
+        ab[0, 2:] = h2
+        rhs = -g + _PIN * np.where(at_lo, lo, np.where(at_hi, hi, 0.0))
+        return solveh_banded(ab, rhs, lower=False, check_finite=False)
+
+    at_lo, at_hi = np.zeros(m, dtype=bool), fixed.copy()
+    for _ in range(max_rounds):
+        x = solve(at_lo, at_hi)
+        grad = hess(x) + g
+        new_lo = ((at_lo & (grad >= 0)) | (x < lo - 1e-9)) & ~fixed
+        new_hi = ((at_hi & (grad <= 0)) | (x > hi + 1e-9)) & ~new_lo | fixed
+        if np.array_equal(new_lo, at_lo) and np.array_equal(new_hi, at_hi):
+            break
+        at_lo, at_hi = new_lo, new_hi
+    x = np.clip(x, lo, hi)
+    at_lo, at_hi = (x <= lo) & ~fixed, (x >= hi) | fixed
+    for _ in range(4 * m + 10):
+        y = solve(at_lo, at_hi)
+        free = ~(at_lo | at_hi)
+        out = free & ((y < lo) | (y > hi))
+        if not out.any():
+            x = np.where(free, y, x)
+            grad = hess(x) + g
+            wrong = np.where(at_lo, -grad, 0.0) + np.where(at_hi & ~fixed, grad, 0.0)
+            i = int(np.argmax(wrong))
+            if wrong[i] <= 1e-9 * (1.0 + float(np.abs(grad).max())):
+                break
+            at_lo[i] = at_hi[i] = False
+            continue
+        d = y - x
+        with np.errstate(divide="ignore", invalid="ignore"):
+            room = np.where(d < 0, (lo - x) / d, np.where(d > 0, (hi - x) / d, np.inf))
+        room = np.where(free, np.clip(room, 0.0, None), np.inf)
+        j = int(np.argmin(room))
+        x = np.where(free, x + min(float(room[j]), 1.0) * d, x)
+        at_lo[j], at_hi[j] = d[j] < 0, d[j] > 0
+    return np.clip(x, lo, hi)
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), m=st.integers(1, 80),
+       weight=st.sampled_from([0.0, 1e-4, 0.1]), max_rounds=st.sampled_from([1, 3, 30]))
+def test_min_bending_offsets_matches_banded_solver(seed: int, m: int, weight: float,
+                                                   max_rounds: int) -> None:
+    """The compiled active-set loops give scipy's banded solutions to rounding (random
+    winding lines, narrow and wide bands, fixed points, stopping the first loop early)."""
+    rng = np.random.default_rng(seed)
+    heading = np.cumsum(rng.normal(0.0, 0.3, m))
+    step = rng.uniform(0.3, 3.0, m)
+    origin = np.column_stack((np.cumsum(step * np.cos(heading)),
+                              np.cumsum(step * np.sin(heading))))
+    normal = np.column_stack((-np.sin(heading), np.cos(heading)))
+    centre = rng.uniform(-1.0, 1.0, m)
+    scale = rng.choice([0.05, 2.0])
+    lo, hi = centre - rng.uniform(0.0, scale, m), centre + rng.uniform(0.0, scale, m)
+    fixed = rng.random(m) < 0.1
+    lo[fixed] = hi[fixed] = centre[fixed]
+    args = (origin, normal, lo, hi, centre, weight, max_rounds)
+    np.testing.assert_allclose(min_bending_offsets(*args), min_bending_reference(*args),
+                               rtol=0.0, atol=1e-9)
