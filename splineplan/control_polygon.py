@@ -75,7 +75,9 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
         raise TrajectoryError(f"a trajectory needs at least 2 roadmap points, got {len(pts)}")
     start = np.asarray(roadmap.start_xy, dtype=float).reshape(2)
     sl = corridor.to_sl(np.vstack((start, pts)))
-    if not corridor.contains(start[None])[0]:
+    # (the start on the road: :meth:`Corridor.contains` on its station and offset)
+    right, left = corridor.bounds_at(sl[0, 0])
+    if not (0.0 <= sl[0, 0] <= corridor.length and right <= sl[0, 1] <= left):
         raise TrajectoryError(
             f"start ({start[0]:.2f}, {start[1]:.2f}) is off the road "
             f"(station {corridor.offset + sl[0, 0]:.1f} m, lateral offset {sl[0, 1]:.2f} m)")
@@ -129,29 +131,16 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     kept = first + band_simplify(verts[first:], origin, tangent, normal, centre, half)
     # long legs get extra control points on them (they stay within the bands)
     vst = vs[ahead]
-    legs = np.column_stack((np.concatenate(([first], kept[:-1])), kept))
-    leg_len = np.hypot(*(verts[legs[:, 1]] - verts[legs[:, 0]]).T)
-    extra_xy, extra_s = [], []
-    for j, (a, b) in enumerate(legs.tolist()):
-        if a == b:
-            continue
-        if smooth:
-            f = _leg_splits(float(leg_len[j]), float(leg_len[j - 1]) if j > 0 else np.inf,
-                            float(leg_len[j + 1]) if j + 1 < len(legs) else np.inf,
-                            params.max_control_spacing, LEG_GROWTH)
-        else:
-            pieces = int(np.ceil(leg_len[j] / params.max_control_spacing - 1e-9))
-            f = np.arange(1, pieces) / max(pieces, 1)
-        if len(f) == 0:
-            continue
-        extra_xy.append(verts[a] + f[:, None] * (verts[b] - verts[a]))
-        extra_s.append(vst[a] + f * (vst[b] - vst[a]))
+    legs_a = np.concatenate(([first], kept[:-1]))
+    leg_len = np.hypot(*(verts[kept] - verts[legs_a]).T)
+    f, leg = _leg_fractions(leg_len, legs_a == kept, params.max_control_spacing, LEG_GROWTH,
+                            smooth)
     counts = np.zeros(len(verts), dtype=np.int64)
     counts[kept] = 1
-    if extra_xy:
-        ex = np.concatenate(extra_xy)
-        es = np.concatenate(extra_s)
-        at = np.searchsorted(vst, es, side="right")
+    if len(f):
+        a, b = legs_a[leg], kept[leg]
+        ex = verts[a] + f[:, None] * (verts[b] - verts[a])
+        at = np.searchsorted(vst, vst[a] + f * (vst[b] - vst[a]), side="right")
         verts = np.insert(verts, at, ex, axis=0)
         counts = np.insert(counts, at, 1)
     pool = np.vstack((start, heading_point, verts))
@@ -364,8 +353,49 @@ def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatA
     return x, True
 
 
+@njit(cache=True)
+def _leg_fractions(leg_len: FloatArray, empty: NDArray[np.bool_], cap: float, ratio: float,
+                   smooth: bool) -> tuple[FloatArray, NDArray[np.int64]]:  # pragma: no cover
+    """Fractions ``(k,)`` at which to split the control polygon's legs of lengths ``leg_len``
+    [m] (none of the ``empty`` ones), and the leg of each: pieces of at most ``cap`` [m],
+    and with ``smooth`` as :func:`_leg_splits` grows them."""
+    n = len(leg_len)
+    frac = np.empty(0)
+    leg = np.empty(0, dtype=np.int64)
+    parts = []
+    owners = []
+    for j in range(n):
+        if empty[j]:
+            continue
+        if smooth:
+            before = leg_len[j - 1] if j > 0 else np.inf
+            after = leg_len[j + 1] if j + 1 < n else np.inf
+            f = _leg_splits(leg_len[j], before, after, cap, ratio)
+        else:
+            pieces = int(np.ceil(leg_len[j] / cap - 1e-9))
+            f = np.empty(max(pieces - 1, 0))
+            for k in range(1, pieces):
+                f[k - 1] = k / max(pieces, 1)
+        if len(f):
+            parts.append(f)
+            owners.append(j)
+    total = 0
+    for f in parts:
+        total += len(f)
+    frac = np.empty(total)
+    leg = np.empty(total, dtype=np.int64)
+    at = 0
+    for q in range(len(parts)):
+        f = parts[q]
+        frac[at:at + len(f)] = f
+        leg[at:at + len(f)] = owners[q]
+        at += len(f)
+    return frac, leg
+
+
+@njit(cache=True)
 def _leg_splits(length: float, before: float, after: float, cap: float, ratio: float
-                ) -> FloatArray:
+                ) -> FloatArray:  # pragma: no cover - compiled
     """Fractions ``(k,)`` of a control-polygon leg of ``length`` [m] at which to split it so
     that no piece is longer than ``cap`` [m] nor ``ratio`` times its neighbour: pieces grow
     geometrically from the legs ``before`` and ``after`` it (their lengths [m]).
@@ -373,7 +403,8 @@ def _leg_splits(length: float, before: float, after: float, cap: float, ratio: f
     A uniform B-spline turns within its shortest legs, so a short leg beside a long one
     gives a sharp bend that the control polygon does not have.
     """
-    cuts_a, cuts_b = [], []
+    cuts_a = []
+    cuts_b = []
     pos, step = 0.0, min(max(ratio * before, 0.5), cap)
     while pos + step < length / 2.0:
         pos += step
@@ -384,12 +415,21 @@ def _leg_splits(length: float, before: float, after: float, cap: float, ratio: f
         pos -= step
         cuts_b.append(pos)
         step = min(step * ratio, cap)
-    lo = cuts_a[-1] if cuts_a else 0.0
-    hi = cuts_b[-1] if cuts_b else length
+    lo = cuts_a[-1] if len(cuts_a) else 0.0
+    hi = cuts_b[-1] if len(cuts_b) else length
     mid = int(np.ceil((hi - lo) / cap - 1e-9))
-    cuts = np.concatenate((cuts_a, lo + (hi - lo) * np.arange(1, mid) / max(mid, 1),
-                           cuts_b[::-1]))
-    return np.asarray(cuts, dtype=float) / length
+    out = np.empty(len(cuts_a) + max(mid - 1, 0) + len(cuts_b))
+    n = 0
+    for c in cuts_a:
+        out[n] = c / length
+        n += 1
+    for k in range(1, mid):
+        out[n] = (lo + (hi - lo) * k / max(mid, 1)) / length
+        n += 1
+    for q in range(len(cuts_b) - 1, -1, -1):
+        out[n] = cuts_b[q] / length
+        n += 1
+    return out
 
 
 # ---- band simplification ---------------------------------------------------------------

@@ -204,3 +204,54 @@ def test_min_bending_offsets_matches_banded_solver(seed: int, m: int, weight: fl
     args = (origin, normal, lo, hi, centre, weight, max_rounds)
     np.testing.assert_allclose(min_bending_offsets(*args), min_bending_reference(*args),
                                rtol=0.0, atol=1e-9)
+
+
+def leg_splits_reference(length: float, before: float, after: float, cap: float,
+                         ratio: float) -> np.ndarray:
+    """Gradually growing pieces of a leg, in plain Python."""
+    cuts_a, cuts_b = [], []
+    pos, step = 0.0, min(max(ratio * before, 0.5), cap)
+    while pos + step < length / 2.0:
+        pos += step
+        cuts_a.append(pos)
+        step = min(step * ratio, cap)
+    pos, step = length, min(max(ratio * after, 0.5), cap)
+    while pos - step > length / 2.0:
+        pos -= step
+        cuts_b.append(pos)
+        step = min(step * ratio, cap)
+    lo = cuts_a[-1] if cuts_a else 0.0
+    hi = cuts_b[-1] if cuts_b else length
+    mid = int(np.ceil((hi - lo) / cap - 1e-9))
+    cuts = np.concatenate((cuts_a, lo + (hi - lo) * np.arange(1, mid) / max(mid, 1),
+                           cuts_b[::-1]))
+    return np.asarray(cuts, dtype=float) / length
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12), smooth=st.booleans(),
+       cap=st.sampled_from([1.0, 4.0, 10.0]))
+def test_leg_fractions_match_leg_by_leg(seed: int, n: int, smooth: bool, cap: float) -> None:
+    """All legs' split fractions at once equal those computed leg by leg (short, long and
+    empty legs; uniform pieces, or pieces growing from the neighbours)."""
+    from splineplan.control_polygon import _leg_fractions
+
+    rng = np.random.default_rng(seed)
+    leg_len = rng.choice([0.0, 0.3, 2.0, 8.0, 40.0], n) * rng.uniform(0.5, 1.5, n)
+    empty = leg_len == 0.0
+    want_f, want_leg = [], []
+    for j in range(n):
+        if empty[j]:
+            continue
+        if smooth:
+            f = leg_splits_reference(leg_len[j], leg_len[j - 1] if j > 0 else np.inf,
+                                     leg_len[j + 1] if j + 1 < n else np.inf, cap, 2.0)
+        else:
+            pieces = int(np.ceil(leg_len[j] / cap - 1e-9))
+            f = np.arange(1, pieces) / max(pieces, 1)
+        want_f.append(f)
+        want_leg.append(np.full(len(f), j))
+    f, leg = _leg_fractions(leg_len, empty, cap, 2.0, smooth)
+    np.testing.assert_array_equal(f, np.concatenate(want_f) if want_f else np.empty(0))
+    np.testing.assert_array_equal(leg, np.concatenate(want_leg) if want_leg else np.empty(0))
+    assert np.all((f > 0.0) & (f < 1.0))
