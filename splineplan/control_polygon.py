@@ -158,40 +158,17 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
 
     Equation (3) moves a point to its neighbours' mean, which drives exactly this sum down;
     this is its fixed point within the bands, found at once: the Hessian is banded
-    (pentadiagonal), solved by banded Cholesky, first in a primal-dual active-set loop
-    (fast, usually exact), then in a primal active-set loop that ends at the optimum (both
-    compiled: :func:`_min_bending_loops`).
+    (pentadiagonal, :func:`_bending_system`), solved by banded factorisation, first in a
+    primal-dual active-set loop (fast, usually exact), then in a primal active-set loop
+    that ends at the optimum (:func:`_min_bending_loops`).
     """
     m = len(origin)
     if m < 3:
         return np.clip(centre, lo, hi)
-    # second differences D (m - 2, m) for uneven spacing (curvature-like, weighted by the
-    # length each one stands for); M = D^T D is pentadiagonal
-    h = np.maximum(np.hypot(*np.diff(origin, axis=0).T), 1e-3)
-    w = np.sqrt(2.0 / (h[:-1] + h[1:]))  # 2 / (h0 + h1) * sqrt((h0 + h1) / 2)
-    coef = np.column_stack((w / h[:-1], -w * (1.0 / h[:-1] + 1.0 / h[1:]), w / h[1:]))
-    m0 = np.zeros(m)
-    m1 = np.zeros(m - 1)
-    for a in range(3):
-        m0[a:m - 2 + a] += coef[:, a] ** 2
-    for a in range(2):
-        m1[a:m - 2 + a] += coef[:, a] * coef[:, a + 1]
-    m2 = coef[:, 0] * coef[:, 2]
-    nn1 = np.einsum("ij,ij->i", normal[:-1], normal[1:])
-    nn2 = np.einsum("ij,ij->i", normal[:-2], normal[2:])
-    n0 = np.einsum("ij,ij->i", normal, normal)
-    # (a tiny ridge keeps the system definite where nothing else pins the offsets down)
-    h0, h1, h2 = m0 * n0 + weight + 1e-9, m1 * nn1, m2 * nn2
-    second = (coef[:, 0, None] * origin[:-2] + coef[:, 1, None] * origin[1:-1]
-              + coef[:, 2, None] * origin[2:])  # D @ origin
-    dt = np.zeros((m, 2))  # D^T @ second
-    dt[:-2] += coef[:, 0, None] * second
-    dt[1:-1] += coef[:, 1, None] * second
-    dt[2:] += coef[:, 2, None] * second
-    g = np.einsum("ij,ij->i", normal, dt) - weight * centre
-
-    x, ok = _min_bending_loops(h0, h1, h2, g, np.ascontiguousarray(lo, dtype=float),
-                               np.ascontiguousarray(hi, dtype=float), max_rounds)
+    f64 = (np.ascontiguousarray(a, dtype=float) for a in (origin, normal, centre, lo, hi))
+    origin, normal, centre, lo, hi = f64
+    h0, h1, h2, g = _bending_system(origin, normal, centre, float(weight))
+    x, ok = _min_bending_loops(h0, h1, h2, g, lo, hi, int(max_rounds))
     if not ok:
         raise np.linalg.LinAlgError("the least-bending system is not positive definite")
     return x
@@ -199,6 +176,55 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
 
 #: Stiffness that holds an offset at its bound in :func:`min_bending_offsets`.
 _PIN = 1e8
+
+
+@njit(cache=True)
+def _bending_system(origin: FloatArray, normal: FloatArray, centre: FloatArray, weight: float
+                    ) -> tuple[FloatArray, ...]:  # pragma: no cover - compiled
+    """The quadratic objective of :func:`min_bending_offsets` in the offsets (``m >= 3``):
+    the diagonal ``h0`` ``(m,)``, the off-diagonals ``h1`` ``(m - 1,)`` and ``h2``
+    ``(m - 2,)`` of its pentadiagonal Hessian, and its gradient ``g`` ``(m,)`` at zero.
+
+    The second differences ``D`` ``(m - 2, m)`` of the points for uneven spacing are
+    curvature-like, weighted by the length each one stands for; the Hessian is
+    ``N^T D^T D N`` (``N``: the normals) plus ``weight`` and a tiny ridge that keeps it
+    definite where nothing else pins the offsets down.
+    """
+    m = len(origin)
+    c0, c1, c2 = np.empty(m - 2), np.empty(m - 2), np.empty(m - 2)
+    for r in range(m - 2):
+        ha = max(np.hypot(origin[r + 1, 0] - origin[r, 0], origin[r + 1, 1] - origin[r, 1]),
+                 1e-3)
+        hb = max(np.hypot(origin[r + 2, 0] - origin[r + 1, 0],
+                          origin[r + 2, 1] - origin[r + 1, 1]), 1e-3)
+        w = np.sqrt(2.0 / (ha + hb))  # 2 / (ha + hb) * sqrt((ha + hb) / 2)
+        c0[r], c1[r], c2[r] = w / ha, -w * (1.0 / ha + 1.0 / hb), w / hb
+    h0, h1, h2, g = np.zeros(m), np.zeros(m - 1), np.empty(m - 2), np.empty(m)
+    dtx, dty = np.zeros(m), np.zeros(m)
+    for r in range(m - 2):
+        h0[r] += c0[r] * c0[r]
+        h0[r + 1] += c1[r] * c1[r]
+        h0[r + 2] += c2[r] * c2[r]
+        h1[r] += c0[r] * c1[r]
+        h1[r + 1] += c1[r] * c2[r]
+        h2[r] = c0[r] * c2[r] * (normal[r, 0] * normal[r + 2, 0]
+                                 + normal[r, 1] * normal[r + 2, 1])
+        # D @ origin, then D^T of it
+        sx = c0[r] * origin[r, 0] + c1[r] * origin[r + 1, 0] + c2[r] * origin[r + 2, 0]
+        sy = c0[r] * origin[r, 1] + c1[r] * origin[r + 1, 1] + c2[r] * origin[r + 2, 1]
+        dtx[r] += c0[r] * sx
+        dty[r] += c0[r] * sy
+        dtx[r + 1] += c1[r] * sx
+        dty[r + 1] += c1[r] * sy
+        dtx[r + 2] += c2[r] * sx
+        dty[r + 2] += c2[r] * sy
+    for k in range(m):
+        h0[k] = (h0[k] * (normal[k, 0] * normal[k, 0] + normal[k, 1] * normal[k, 1])
+                 + weight + 1e-9)
+        g[k] = normal[k, 0] * dtx[k] + normal[k, 1] * dty[k] - weight * centre[k]
+    for k in range(m - 1):
+        h1[k] *= normal[k, 0] * normal[k + 1, 0] + normal[k, 1] * normal[k + 1, 1]
+    return h0, h1, h2, g
 
 
 @njit(cache=True)
@@ -210,11 +236,9 @@ def _hess(h0: FloatArray, h1: FloatArray, h2: FloatArray, x: FloatArray
     y = h0 * x
     for k in range(m - 1):
         y[k] += h1[k] * x[k + 1]
-    for k in range(m - 1):
         y[k + 1] += h1[k] * x[k]
     for k in range(m - 2):
         y[k] += h2[k] * x[k + 2]
-    for k in range(m - 2):
         y[k + 2] += h2[k] * x[k]
     return y
 
@@ -222,49 +246,55 @@ def _hess(h0: FloatArray, h1: FloatArray, h2: FloatArray, x: FloatArray
 @njit(cache=True)
 def _pinned_solve(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatArray,
                   lo: FloatArray, hi: FloatArray, at_lo: NDArray[np.bool_],
-                  at_hi: NDArray[np.bool_]) -> tuple[FloatArray, bool]:  # pragma: no cover
-    """Minimum of ``x H x / 2 + g x`` with the offsets in ``at_lo`` / ``at_hi`` held at those
-    bounds by a stiff penalty (:data:`_PIN`), by Cholesky factorisation ``U^T U`` of the
-    pentadiagonal system; ``False`` if it is not positive definite."""
+                  at_hi: NDArray[np.bool_], start: int, fac: FloatArray, x: FloatArray
+                  ) -> bool:  # pragma: no cover - compiled
+    """Minimum ``x`` of ``x H x / 2 + g x`` with the offsets in ``at_lo`` / ``at_hi`` held at
+    those bounds by a stiff penalty (:data:`_PIN`); ``False`` if the system is not positive
+    definite.
+
+    ``fac`` ``(5, m)`` holds the factorisation ``L D L^T`` of the pentadiagonal system
+    (``D``, the two subdiagonals of ``L``), ``w = L^-1 b`` and ``D^-1 w``; its columns
+    before ``start`` are those of the previous call (the first offset whose pin changed
+    since: the factorisation runs from the first row on).
+    """
     m = len(h0)
-    d = np.empty(m)
-    u1 = np.zeros(m)
-    u2 = np.zeros(m)
-    y = np.empty(m)
-    for j in range(m):
-        pinned = at_lo[j] or at_hi[j]
-        a = h0[j] + _PIN if pinned else h0[j]
+    dd, l1, l2, w, z = fac[0], fac[1], fac[2], fac[3], fac[4]
+    for j in range(start, m):
+        a = h0[j]
         b = -g[j]
         if at_lo[j]:
+            a += _PIN
             b += _PIN * lo[j]
         elif at_hi[j]:
+            a += _PIN
             b += _PIN * hi[j]
+        c = h1[j] if j + 1 < m else 0.0
         if j >= 1:
-            a -= u1[j - 1] * u1[j - 1]
-            b -= u1[j - 1] * y[j - 1]
+            t = l1[j - 1] * dd[j - 1]
+            a -= l1[j - 1] * t
+            c -= l2[j - 1] * t
+            b -= l1[j - 1] * w[j - 1]
         if j >= 2:
-            a -= u2[j - 2] * u2[j - 2]
-            b -= u2[j - 2] * y[j - 2]
+            t = l2[j - 2] * dd[j - 2]
+            a -= l2[j - 2] * t
+            b -= l2[j - 2] * w[j - 2]
         if not a > 0.0:
-            return y, False
-        d[j] = np.sqrt(a)
-        y[j] = b / d[j]
+            return False
+        dd[j] = a
+        w[j] = b
+        z[j] = b / a
         if j + 1 < m:
-            c = h1[j]
-            if j >= 1:
-                c -= u1[j - 1] * u2[j - 1]
-            u1[j] = c / d[j]
+            l1[j] = c / a
         if j + 2 < m:
-            u2[j] = h2[j] / d[j]
-    x = np.empty(m)
+            l2[j] = h2[j] / a
     for j in range(m - 1, -1, -1):
-        v = y[j]
+        v = z[j]
         if j + 1 < m:
-            v -= u1[j] * x[j + 1]
+            v -= l1[j] * x[j + 1]
         if j + 2 < m:
-            v -= u2[j] * x[j + 2]
-        x[j] = v / d[j]
-    return x, True
+            v -= l2[j] * x[j + 2]
+        x[j] = v
+    return True
 
 
 @njit(cache=True)
@@ -276,34 +306,36 @@ def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatA
     system was positive definite."""
     m = len(h0)
     fixed = lo >= hi
+    fac = np.zeros((5, m))
     # primal-dual active set: fast, usually exact, but not guaranteed to settle
     at_lo = np.zeros(m, dtype=np.bool_)
     at_hi = fixed.copy()
     x = np.zeros(m)
+    start = 0
     for _ in range(max_rounds):
-        x, ok = _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi)
-        if not ok:
+        if not _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi, start, fac, x):
             return x, False
         grad = _hess(h0, h1, h2, x) + g
-        same = True
+        start = m
         for k in range(m):
             new_lo = ((at_lo[k] and grad[k] >= 0) or x[k] < lo[k] - 1e-9) and not fixed[k]
             new_hi = (((at_hi[k] and grad[k] <= 0) or x[k] > hi[k] + 1e-9) and not new_lo
                       ) or fixed[k]
-            if new_lo != at_lo[k] or new_hi != at_hi[k]:
-                same = False
+            if (new_lo != at_lo[k] or new_hi != at_hi[k]) and start == m:
+                start = k
             at_lo[k], at_hi[k] = new_lo, new_hi
-        if same:
+        if start == m:
             break
     # primal active set from there: each step stays within the bounds and lowers the
     # objective, so it ends at the optimum
+    start = 0
     for k in range(m):
         x[k] = min(max(x[k], lo[k]), hi[k])
         at_lo[k] = x[k] <= lo[k] and not fixed[k]
         at_hi[k] = x[k] >= hi[k] or fixed[k]
+    y = np.empty(m)
     for _ in range(4 * m + 10):
-        y, ok = _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi)
-        if not ok:
+        if not _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi, start, fac, y):
             return x, False
         out = False
         for k in range(m):
@@ -328,6 +360,7 @@ def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatA
             if worst <= 1e-9 * (1.0 + big):
                 break
             at_lo[i] = at_hi[i] = False
+            start = i
             continue
         j, room_j = 0, np.inf
         for k in range(m):
@@ -348,6 +381,7 @@ def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatA
             if not (at_lo[k] or at_hi[k]):
                 x[k] = x[k] + t * (y[k] - x[k])
         at_lo[j], at_hi[j] = dj < 0, dj > 0
+        start = j
     for k in range(m):
         x[k] = min(max(x[k], lo[k]), hi[k])
     return x, True

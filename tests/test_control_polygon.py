@@ -189,7 +189,8 @@ def min_bending_reference(origin: np.ndarray, normal: np.ndarray, lo: np.ndarray
 def test_min_bending_offsets_matches_banded_solver(seed: int, m: int, weight: float,
                                                    max_rounds: int) -> None:
     """The compiled active-set loops give scipy's banded solutions to rounding (random
-    winding lines, narrow and wide bands, fixed points, stopping the first loop early)."""
+    winding lines, narrow and wide bands, fixed points, stopping the first loop early;
+    without weight, three points make a system with a condition number near 1e9)."""
     rng = np.random.default_rng(seed)
     heading = np.cumsum(rng.normal(0.0, 0.3, m))
     step = rng.uniform(0.3, 3.0, m)
@@ -203,7 +204,7 @@ def test_min_bending_offsets_matches_banded_solver(seed: int, m: int, weight: fl
     lo[fixed] = hi[fixed] = centre[fixed]
     args = (origin, normal, lo, hi, centre, weight, max_rounds)
     np.testing.assert_allclose(min_bending_offsets(*args), min_bending_reference(*args),
-                               rtol=0.0, atol=1e-9)
+                               rtol=0.0, atol=1e-9 if weight > 0 else 1e-6)
 
 
 def leg_splits_reference(length: float, before: float, after: float, cap: float,
