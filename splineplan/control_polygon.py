@@ -12,7 +12,7 @@ and the corridor: no spline and no footprint here.
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -48,24 +48,28 @@ def _sharp_bend(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams) 
     return bool(np.any(turn > 0.5 * params.kappa_max * _BEND_BASE))
 
 
-def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float | None,
-                    params: TrajectoryParams, start_speed: float, smooth: bool = False
-                    ) -> tuple[FloatArray, NDArray[np.int64]]:
-    """Candidate control points ``(c, 2)`` and how often the first curve uses each (0 or 1).
+@dataclass(frozen=True, eq=False)
+class VertexFrame:
+    """What :func:`_control_points` needs of the roadmap and the corridor whichever its
+    polygon (:func:`vertex_frame`)."""
 
-    The candidates are the vehicle's position, a heading point ahead of it and the roadmap
-    vertices beyond the heading point. The first curve uses the first two, the last, and the
-    vertices that band simplification (:func:`band_simplify`) keeps, beginning at the
-    farthest vertex that the vehicle's position reaches within the bands (at least the
-    lead-in distance ahead).
+    start: FloatArray  #: (2,) the vehicle's position [m]
+    pts: FloatArray  #: (m, 2) the distinct roadmap vertices at their bands' centres [m]
+    s0: float  #: the start's station [m]
+    vs: FloatArray  #: (m,) the vertices' stations [m]
+    lines: tuple[FloatArray, ...]  #: the vertices' :func:`_vertex_lines`
 
-    With ``smooth``, the vertices beyond the lead-in first move within their bands to the
-    polygon of least bending (:func:`min_bending_offsets`), band simplification then drops
-    those that stand in line, and long legs are split in pieces that grow gradually from
-    the short legs beside them (:func:`_leg_splits`): the first curve then turns as gently
-    as the bands allow, which a junction turn needs.
+
+def vertex_frame(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams
+                 ) -> VertexFrame:
+    """The roadmap's vertices in the corridor's frame, with their sweep lines and bands.
+
+    Raises
+    ------
+    TrajectoryError
+        Fewer than two distinct roadmap points, a start off the road, or a roadmap that
+        ends at or behind the start.
     """
-    rp = roadmap.params
     raw = np.asarray(roadmap.xy, dtype=float)
     if raw.ndim != 2 or raw.shape[1] != 2 or len(raw) < 2:
         raise TrajectoryError(f"a trajectory needs at least 2 roadmap points, got {len(raw)}")
@@ -81,11 +85,8 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
         raise TrajectoryError(
             f"start ({start[0]:.2f}, {start[1]:.2f}) is off the road "
             f"(station {corridor.offset + sl[0, 0]:.1f} m, lateral offset {sl[0, 1]:.2f} m)")
-    if start_heading is not None and not np.isfinite(start_heading):
-        raise TrajectoryError(f"start heading must be finite, got {start_heading!r}")
     s0, vs = float(sl[0, 0]), sl[1:, 0]
-    reach = float(vs[-1] - s0)
-    if reach <= 1e-6:
+    if float(vs[-1] - s0) <= 1e-6:
         raise TrajectoryError("the roadmap ends at or behind the vehicle: no curve to follow")
     lines = _vertex_lines(roadmap, corridor, distinct, sl[1:], params.band_fraction,
                           params.band_reserve)
@@ -94,21 +95,53 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
     pts = pts.copy()
     pts[moved] = lines[0][moved] + lines[3][moved, None] * lines[2][moved]
+    return VertexFrame(start, pts, s0, vs, lines)
+
+
+def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float | None,
+                    params: TrajectoryParams, start_speed: float, smooth: bool = False,
+                    frame: VertexFrame | None = None) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Candidate control points ``(c, 2)`` and how often the first curve uses each (0 or 1).
+
+    The candidates are the vehicle's position, a heading point ahead of it and the roadmap
+    vertices beyond the heading point. The first curve uses the first two, the last, and the
+    vertices that band simplification (:func:`band_simplify`) keeps, beginning at the
+    farthest vertex that the vehicle's position reaches within the bands (at least the
+    lead-in distance ahead).
+
+    With ``smooth``, the vertices beyond the lead-in first move within their bands to the
+    polygon of least bending (:func:`min_bending_offsets`), band simplification then drops
+    those that stand in line, and long legs are split in pieces that grow gradually from
+    the short legs beside them (:func:`_leg_splits`): the first curve then turns as gently
+    as the bands allow, which a junction turn needs.
+
+    ``frame``: the roadmap's :func:`vertex_frame` (computed here if ``None``; both
+    polygons of one roadmap share it).
+    """
+    rp = roadmap.params
+    if frame is None:
+        frame = vertex_frame(roadmap, corridor, params)
+    if start_heading is not None and not np.isfinite(start_heading):
+        raise TrajectoryError(f"start heading must be finite, got {start_heading!r}")
+    start, pts, s0, vs, lines = frame.start, frame.pts, frame.s0, frame.vs, frame.lines
+    reach = float(vs[-1] - s0)
     lead = max(params.lead_in_lengths * rp.vehicle_length, params.lead_in_time * start_speed)
     lead = min(lead, 0.5 * reach)
     head_len = max(min(lead / 2.0, reach / 3.0), 1e-3)
     ahead = vs > s0 + head_len + rp.d / 2.0
     ahead[-1] = True
     verts = pts[ahead]
-    lines = tuple(a[ahead] for a in lines)  # type: ignore[assignment]
+    lines = tuple(a[ahead] for a in lines)
     first = int(np.searchsorted(vs[ahead], s0 + lead - 1e-9))
     first = min(first, len(verts) - 1)
     if not smooth:
+        ends = _band_ends(verts, lines[0], lines[2], lines[3], lines[4])
         # from the vehicle's position as far as the bands allow
         cap = int(np.searchsorted(polyline_stations(verts), params.max_control_spacing
                                   - float(np.hypot(*(verts[0] - start))), side="right")) - 1
         if cap >= 0:
-            first = max(first, _farthest(start, -1, cap, verts, *lines))
+            first = max(first, _farthest_from(float(start[0]), float(start[1]), -1, cap, ends,
+                                              lines[0], lines[1], _TOL))
     if start_heading is None:
         direction = verts[first] - start
     else:
@@ -127,24 +160,34 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
             np.concatenate((fixed, centre)), SMOOTH_CENTRE_WEIGHT)[2:]
         verts = verts.copy()
         verts[first:] = origin + lat[:, None] * normal
-        centre, half = lat, np.minimum(half, SMOOTH_TOLERANCE)
-    kept = first + band_simplify(verts[first:], origin, tangent, normal, centre, half)
+        ends = _band_ends(verts[first:], origin, normal, lat,
+                          np.minimum(half, SMOOTH_TOLERANCE))
+    else:
+        ends = ends[first:]
+    kept = first + _simplify(ends, origin, tangent)
     # long legs get extra control points on them (they stay within the bands)
     vst = vs[ahead]
     legs_a = np.concatenate(([first], kept[:-1]))
     leg_len = np.hypot(*(verts[kept] - verts[legs_a]).T)
     f, leg = _leg_fractions(leg_len, legs_a == kept, params.max_control_spacing, LEG_GROWTH,
                             smooth)
-    counts = np.zeros(len(verts), dtype=np.int64)
-    counts[kept] = 1
-    if len(f):
-        a, b = legs_a[leg], kept[leg]
-        ex = verts[a] + f[:, None] * (verts[b] - verts[a])
-        at = np.searchsorted(vst, vst[a] + f * (vst[b] - vst[a]), side="right")
-        verts = np.insert(verts, at, ex, axis=0)
-        counts = np.insert(counts, at, 1)
-    pool = np.vstack((start, heading_point, verts))
-    return pool, np.concatenate(([1, 1], counts)).astype(np.int64)
+    a, b = legs_a[leg], kept[leg]
+    ex = verts[a] + f[:, None] * (verts[b] - verts[a])
+    at = np.searchsorted(vst, vst[a] + f * (vst[b] - vst[a]), side="right")
+    # the extra points go before the vertices at ``at`` (in their order where they share
+    # one), behind the vehicle's position and the heading point
+    order = np.argsort(at, kind="stable")
+    new = 2 + at[order] + np.arange(len(at))
+    old = np.ones(len(verts) + len(at) + 2, dtype=bool)
+    old[:2] = False
+    old[new] = False
+    pool = np.empty((len(old), 2))
+    pool[0], pool[1] = start, heading_point
+    pool[old] = verts
+    pool[new] = ex[order]
+    counts = (~old).astype(np.int64)
+    counts[np.flatnonzero(old)[kept]] = 1
+    return pool, counts
 
 
 # ---- least bending ---------------------------------------------------------------------
@@ -518,30 +561,21 @@ def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, norm
     pts = np.asarray(points, dtype=float)
     org, tan, nrm, cen, hlf = (np.asarray(a, dtype=float)
                                for a in (origin, tangent, normal, centre, half))
-    m = len(pts)
-    if m <= 2:
-        return np.arange(m, dtype=np.int64)
-    ends = _band_ends(pts, org, nrm, cen, hlf)
-    return _band_simplify_loop(ends, np.ascontiguousarray(org), np.ascontiguousarray(tan),
-                               _TOL)
+    return _simplify(_band_ends(pts, org, nrm, cen, hlf), org, tan)
 
 
 #: Angular tolerance [rad] of band simplification's test.
 _TOL = 1e-9
 
 
-def _farthest(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
-              tangent: FloatArray, normal: FloatArray, centre: FloatArray, half: FloatArray
-              ) -> int:
-    """Largest ``j`` in ``(i, cap]`` (at least ``i + 1``) such that every segment
-    ``p -> pts[j']``, ``i < j' <= j``, crosses the lines ``i < k < j'`` inside their bands
-    (:func:`_farthest_from`)."""
-    if cap <= i + 1:
-        return min(i + 1, len(pts) - 1)
-    ends = _band_ends(pts, origin, normal, centre, half)
-    return _farthest_from(float(p[0]), float(p[1]), i, cap, ends,
-                          np.ascontiguousarray(origin, dtype=float),
-                          np.ascontiguousarray(tangent, dtype=float), _TOL)
+def _simplify(ends: FloatArray, origin: FloatArray, tangent: FloatArray) -> NDArray[np.int64]:
+    """:func:`band_simplify` of the vertices with the band ends ``ends`` (:func:`_band_ends`),
+    on lines through ``origin`` ``(m, 2)``, the road's direction there ``tangent`` ``(m, 2)``."""
+    m = len(ends)
+    if m <= 2:
+        return np.arange(m, dtype=np.int64)
+    return _band_simplify_loop(ends, np.ascontiguousarray(origin, dtype=float),
+                               np.ascontiguousarray(tangent, dtype=float), _TOL)
 
 
 def _band_ends(pts: FloatArray, origin: FloatArray, normal: FloatArray, centre: FloatArray,

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import solveh_banded
 
 from splineplan.control_polygon import (
     _PIN,
-    _farthest,
+    _TOL,
+    _band_ends,
+    _farthest_from,
     band_simplify,
     min_bending_offsets,
 )
@@ -99,7 +102,8 @@ def test_farthest_from_a_point_off_the_vertices(seed: int, m: int, width: float)
     for i in (-1, *rng.integers(0, m, 3).tolist()):
         p = start if i < 0 else pts[i]
         cap = int(rng.integers(i + 1, m)) if i + 1 < m else m - 1
-        assert (_farthest(p, i, cap, pts, origin, tangent, normal, centre, half)
+        ends = _band_ends(pts, origin, normal, centre, half)
+        assert (_farthest_from(float(p[0]), float(p[1]), i, cap, ends, origin, tangent, _TOL)
                 == farthest_reference(p, i, cap, pts, origin, tangent, normal, centre, half))
 
 
@@ -256,3 +260,29 @@ def test_leg_fractions_match_leg_by_leg(seed: int, n: int, smooth: bool, cap: fl
     np.testing.assert_array_equal(f, np.concatenate(want_f) if want_f else np.empty(0))
     np.testing.assert_array_equal(leg, np.concatenate(want_leg) if want_leg else np.empty(0))
     assert np.all((f > 0.0) & (f < 1.0))
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_shared_vertex_frame_gives_the_same_polygons(seed: int) -> None:
+    """Both control polygons of a roadmap from one :func:`vertex_frame` equal those that
+    compute it themselves, and building them leaves the shared frame as it was."""
+    from benchmarks.fields import obstacle_field
+    from splineplan.control_polygon import _control_points, vertex_frame
+    from splineplan.planner import elongate_for_roadmap
+    from splineplan.roadmap import RoadmapParams, plan_roadmap
+    from splineplan.trajectory_params import TrajectoryParams
+
+    corridor, obstacles, start = obstacle_field(300, 20, 9.6, seed)
+    rp = RoadmapParams()
+    rm = plan_roadmap(corridor, elongate_for_roadmap(corridor, obstacles, rp), start, rp)
+    params = TrajectoryParams()
+    frame = vertex_frame(rm, corridor, params)
+    before = [a.copy() for a in (frame.start, frame.pts, frame.vs, *frame.lines)]
+    for smooth in (False, True, False):
+        pool, counts = _control_points(rm, corridor, 0.0, params, 5.0, smooth, frame=frame)
+        want_pool, want_counts = _control_points(rm, corridor, 0.0, params, 5.0, smooth)
+        np.testing.assert_array_equal(pool, want_pool)
+        np.testing.assert_array_equal(counts, want_counts)
+        assert counts.sum() < len(counts) and counts[:2].tolist() == [1, 1]
+    for a, b in zip(before, (frame.start, frame.pts, frame.vs, *frame.lines), strict=True):
+        np.testing.assert_array_equal(a, b)
