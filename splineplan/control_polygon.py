@@ -684,8 +684,7 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     vid = np.full((n_lines, nb), -1, dtype=np.int64)
     b_lo = np.ceil((lo_v - h / 2 - l0) / h - 1e-9).astype(np.int64)
     b_hi = np.floor((hi_v + h / 2 - l0) / h + 1e-9).astype(np.int64)
-    for v in range(n_v):
-        vid[line[v], b_lo[v]:b_hi[v] + 1] = v
+    _fill_bins(vid, line, b_lo, b_hi)
     lv = np.clip(grid[None, :], lo_v[vid], hi_v[vid])
     near = np.minimum(lv - lo_v[vid], hi_v[vid] - lv)
     penalty = np.where(vid >= 0, np.maximum(_DETOUR_CLEAR - near, 0.0) ** 2, np.inf)
@@ -694,7 +693,6 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     ds = np.maximum(np.diff(st), 1e-6)
     r = int(np.floor(rate * float(ds.max()) / h + 1e-9))
     dlt = np.arange(-r, r + 1)
-    frm = np.arange(nb)[:, None] - dlt[None, :]
     # arcs as tables per pair of lines, (lines - 1, P + 1, P + 1), over each vertex's index
     # on its line (P: none, never connected)
     by_line = np.argsort(line, kind="stable")
@@ -707,34 +705,18 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     table[line[arcs[:, 0]], loc[arcs[:, 0]], loc[arcs[:, 1]]] = True
     lid = np.full((n_lines, nb + 2 * r), n_loc)  # padded by r bins of none on each side
     lid[:, r:r + nb] = np.where(vid >= 0, loc[vid], n_loc)
-    # flat index into the tables: (line, from, to)
-    flat = lid[:-1][:, frm + r]
-    flat += (n_loc + 1) * np.arange(n_lines - 1)[:, None, None]
-    flat *= n_loc + 1
-    flat += lid[1:, r:r + nb, None]
-    ok = table.ravel()[flat]
-    ok &= np.abs(dlt)[None, None, :] * h <= rate * ds[:, None, None] + 1e-9
-    lat_cost = (dlt[None, :] * h) ** 2 / ds[:, None]  # (lines - 1, 2r + 1)
-    step_cost = np.where(ok, lat_cost[:, None, :], np.inf)  # (lines - 1, nb, 2r + 1)
-    frm_c = np.clip(frm, 0, nb - 1)
+    # moves within the rate and their lateral cost, (lines - 1, 2r + 1)
+    within = np.abs(dlt)[None, :] * h <= rate * ds[:, None] + 1e-9
+    lat_cost = (dlt[None, :] * h) ** 2 / ds[:, None]
     # start: the source vertex, at the vehicle's offset
     src = int(roadmap.path[0])
     l_start = float(corridor.to_sl(np.asarray(roadmap.start_xy, dtype=float)[None])[0, 1])
     cost = np.where(vid[0] == src, np.abs(grid - l_start), np.inf)
     cost = np.where(cost <= np.min(cost) + 1e-9, penalty[0], np.inf)
-    back = np.zeros((n_lines, nb), dtype=np.int64)
-    rows = np.arange(nb)
-    for k in range(n_lines - 1):
-        cand = cost[frm_c] + step_cost[k]
-        j = np.argmin(cand, axis=1)
-        cost = cand[rows, j] + penalty[k + 1]
-        back[k + 1] = j
+    cost, back = _detour_sweep(cost, penalty, lid, table, within, lat_cost, r)
     if not np.isfinite(cost).any():
         return None
-    bins = np.zeros(n_lines, dtype=np.int64)
-    bins[-1] = int(np.argmin(cost))
-    for k in range(n_lines - 1, 0, -1):
-        bins[k - 1] = frm_c[bins[k], back[k, bins[k]]]
+    bins = _detour_bins(back, int(np.argmin(cost)), r)
     ks = np.arange(n_lines)
     path = vid[ks, bins]
     lat = lv[ks, bins]
@@ -745,3 +727,60 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
                    bottleneck_width=float(width[j]), bottleneck_index=j,
                    length=float(polyline_stations(xy)[-1]), path=path,
                    links=np.zeros((0, 2, 2)))
+
+
+@njit(cache=True)
+def _fill_bins(vid: NDArray[np.int64], line: NDArray[np.int64], b_lo: NDArray[np.int64],
+               b_hi: NDArray[np.int64]) -> None:  # pragma: no cover - compiled
+    """Writes vertex ``v`` into ``vid[line[v], b_lo[v]:b_hi[v] + 1]``, vertex after vertex."""
+    for v in range(len(line)):
+        for b in range(max(b_lo[v], 0), min(b_hi[v] + 1, vid.shape[1])):
+            vid[line[v], b] = v
+
+
+@njit(cache=True)
+def _detour_sweep(cost: FloatArray, penalty: FloatArray, lid: NDArray[np.int64],
+                  table: NDArray[np.bool_], within: NDArray[np.bool_], lat_cost: FloatArray,
+                  r: int) -> tuple[FloatArray, NDArray[np.int64]]:  # pragma: no cover
+    """:func:`detour_roadmap`'s dynamic programme over the lines.
+
+    From the costs ``(nb,)`` on the first line, bin ``b`` of line ``k + 1`` takes the
+    cheapest move ``b - dlt -> b`` (``dlt = d - r``, ``d < 2r + 1``; the first of equal
+    ones) that is ``within[k, d]`` the rate and follows an arc: ``table[k, p, q]`` of the
+    bins' vertices' places ``lid[k, b - dlt + r]``, ``lid[k + 1, b + r]`` on their lines
+    (``lid`` ``(lines, nb + 2r)`` padded by ``r`` bins of none on each side); the move costs
+    ``lat_cost[k, d]``, the bin its ``penalty[k + 1, b]``. Returns the costs on the last line
+    and the move ``d`` taken into each bin ``(lines, nb)``.
+    """
+    n_lines, nb = penalty.shape
+    w = 2 * r + 1
+    back = np.zeros((n_lines, nb), dtype=np.int64)
+    for k in range(n_lines - 1):
+        new = np.empty(nb)
+        for b in range(nb):
+            to = lid[k + 1, b + r]
+            j, best = 0, np.inf
+            for d in range(w):
+                f = b - (d - r)
+                if not (within[k, d] and table[k, lid[k, f + r], to]):
+                    continue
+                c = cost[min(max(f, 0), nb - 1)] + lat_cost[k, d]
+                if c < best:
+                    j, best = d, c
+            new[b] = best + penalty[k + 1, b]
+            back[k + 1, b] = j
+        cost = new
+    return cost, back
+
+
+@njit(cache=True)
+def _detour_bins(back: NDArray[np.int64], last: int, r: int
+                 ) -> NDArray[np.int64]:  # pragma: no cover - compiled
+    """The bins ``(lines,)`` of :func:`_detour_sweep`'s moves back from bin ``last`` of the
+    last line."""
+    n_lines, nb = back.shape
+    bins = np.zeros(n_lines, dtype=np.int64)
+    bins[-1] = last
+    for k in range(n_lines - 1, 0, -1):
+        bins[k - 1] = min(max(bins[k] - (back[k, bins[k]] - r), 0), nb - 1)
+    return bins

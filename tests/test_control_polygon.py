@@ -286,3 +286,59 @@ def test_shared_vertex_frame_gives_the_same_polygons(seed: int) -> None:
         assert counts.sum() < len(counts) and counts[:2].tolist() == [1, 1]
     for a, b in zip(before, (frame.start, frame.pts, frame.vs, *frame.lines), strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def detour_sweep_reference(cost: np.ndarray, penalty: np.ndarray, lid: np.ndarray,
+                           table: np.ndarray, within: np.ndarray, lat_cost: np.ndarray,
+                           r: int) -> tuple[np.ndarray, np.ndarray]:
+    """The detour's dynamic programme in array code: all moves' costs as one table, then
+    a minimum per line."""
+    n_lines, nb = penalty.shape
+    n_loc = table.shape[1] - 1
+    dlt = np.arange(-r, r + 1)
+    frm = np.arange(nb)[:, None] - dlt[None, :]
+    flat = lid[:-1][:, frm + r]
+    flat += (n_loc + 1) * np.arange(n_lines - 1)[:, None, None]
+    flat *= n_loc + 1
+    flat += lid[1:, r:r + nb, None]
+    ok = table.ravel()[flat] & within[:, None, :]
+    step_cost = np.where(ok, lat_cost[:, None, :], np.inf)
+    frm_c = np.clip(frm, 0, nb - 1)
+    back = np.zeros((n_lines, nb), dtype=np.int64)
+    rows = np.arange(nb)
+    for k in range(n_lines - 1):
+        cand = cost[frm_c] + step_cost[k]
+        j = np.argmin(cand, axis=1)
+        cost = cand[rows, j] + penalty[k + 1]
+        back[k + 1] = j
+    bins = np.zeros(n_lines, dtype=np.int64)
+    bins[-1] = int(np.argmin(cost))
+    for k in range(n_lines - 1, 0, -1):
+        bins[k - 1] = frm_c[bins[k], back[k, bins[k]]]
+    return cost, bins
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_lines=st.integers(1, 40), nb=st.integers(1, 30),
+       r=st.integers(0, 4), n_loc=st.integers(1, 4))
+def test_detour_sweep_matches_array_formula(seed: int, n_lines: int, nb: int, r: int,
+                                            n_loc: int) -> None:
+    """Random arcs, rates, costs (with ties: costs on a coarse grid) and bins without a
+    vertex: the compiled programme takes the same moves to the same costs."""
+    from splineplan.control_polygon import _detour_bins, _detour_sweep
+
+    rng = np.random.default_rng(seed)
+    lid = np.full((n_lines, nb + 2 * r), n_loc)
+    lid[:, r:r + nb] = rng.integers(0, n_loc + 1, (n_lines, nb))
+    table = rng.random((max(n_lines - 1, 0), n_loc + 1, n_loc + 1)) < 0.6
+    table[:, n_loc, :] = table[:, :, n_loc] = False
+    within = rng.random((max(n_lines - 1, 0), 2 * r + 1)) < 0.8
+    lat_cost = rng.integers(0, 4, (max(n_lines - 1, 0), 2 * r + 1)) * 0.25
+    penalty = np.where(rng.random((n_lines, nb)) < 0.1, np.inf,
+                       rng.integers(0, 3, (n_lines, nb)) * 0.5)
+    cost = np.where(rng.random(nb) < 0.5, np.inf, rng.integers(0, 3, nb) * 0.5)
+    want_cost, want_bins = detour_sweep_reference(cost, penalty, lid, table, within,
+                                                  lat_cost, r)
+    got_cost, back = _detour_sweep(cost, penalty, lid, table, within, lat_cost, r)
+    np.testing.assert_array_equal(got_cost, want_cost)
+    np.testing.assert_array_equal(_detour_bins(back, int(np.argmin(got_cost)), r), want_bins)
