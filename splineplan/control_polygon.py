@@ -8,6 +8,10 @@ legs are split in gradually growing pieces; the vehicle's position and a heading
 in. Where the curve along level 2's path cannot be made feasible, :func:`detour_roadmap`
 searches the same graph for a path of limited lateral rate. Pure geometry on the roadmap
 and the corridor: no spline and no footprint here.
+
+The string pulling, the least-bending active-set loops, the leg splits and the detour's
+dynamic programme are loops compiled with numba (cached on disk after the first run): as
+array code they spent most of their time in the overhead of many small numpy calls.
 """
 
 from __future__ import annotations
@@ -130,9 +134,9 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     head_len = max(min(lead / 2.0, reach / 3.0), 1e-3)
     ahead = vs > s0 + head_len + rp.d / 2.0
     ahead[-1] = True
-    verts = pts[ahead]
+    verts, vst = pts[ahead], vs[ahead]
     lines = tuple(a[ahead] for a in lines)
-    first = int(np.searchsorted(vs[ahead], s0 + lead - 1e-9))
+    first = int(np.searchsorted(vst, s0 + lead - 1e-9))
     first = min(first, len(verts) - 1)
     if not smooth:
         ends = _band_ends(verts, lines[0], lines[2], lines[3], lines[4])
@@ -166,7 +170,6 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
         ends = ends[first:]
     kept = first + _simplify(ends, origin, tangent)
     # long legs get extra control points on them (they stay within the bands)
-    vst = vs[ahead]
     legs_a = np.concatenate(([first], kept[:-1]))
     leg_len = np.hypot(*(verts[kept] - verts[legs_a]).T)
     f, leg = _leg_fractions(leg_len, legs_a == kept, params.max_control_spacing, LEG_GROWTH,
