@@ -8,13 +8,18 @@ legs are split in gradually growing pieces; the vehicle's position and a heading
 in. Where the curve along level 2's path cannot be made feasible, :func:`detour_roadmap`
 searches the same graph for a path of limited lateral rate. Pure geometry on the roadmap
 and the corridor: no spline and no footprint here.
+
+The string pulling, the least-bending active-set loops, the leg splits and the detour's
+dynamic programme are loops compiled with numba (cached on disk after the first run): as
+array code they spent most of their time in the overhead of many small numpy calls.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import Corridor
@@ -47,9 +52,59 @@ def _sharp_bend(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams) 
     return bool(np.any(turn > 0.5 * params.kappa_max * _BEND_BASE))
 
 
+@dataclass(frozen=True, eq=False)
+class VertexFrame:
+    """What :func:`_control_points` needs of the roadmap and the corridor whichever its
+    polygon (:func:`vertex_frame`)."""
+
+    start: FloatArray  #: (2,) the vehicle's position [m]
+    pts: FloatArray  #: (m, 2) the distinct roadmap vertices at their bands' centres [m]
+    s0: float  #: the start's station [m]
+    vs: FloatArray  #: (m,) the vertices' stations [m]
+    lines: tuple[FloatArray, ...]  #: the vertices' :func:`_vertex_lines`
+
+
+def vertex_frame(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams
+                 ) -> VertexFrame:
+    """The roadmap's vertices in the corridor's frame, with their sweep lines and bands.
+
+    Raises
+    ------
+    TrajectoryError
+        Fewer than two distinct roadmap points, a start off the road, or a roadmap that
+        ends at or behind the start.
+    """
+    raw = np.asarray(roadmap.xy, dtype=float)
+    if raw.ndim != 2 or raw.shape[1] != 2 or len(raw) < 2:
+        raise TrajectoryError(f"a trajectory needs at least 2 roadmap points, got {len(raw)}")
+    distinct = np.concatenate(([True], np.hypot(*np.diff(raw, axis=0).T) > 1e-6))
+    pts = raw[distinct]
+    if len(pts) < 2:
+        raise TrajectoryError(f"a trajectory needs at least 2 roadmap points, got {len(pts)}")
+    start = np.asarray(roadmap.start_xy, dtype=float).reshape(2)
+    sl = corridor.to_sl(np.vstack((start, pts)))
+    # (the start on the road: :meth:`Corridor.contains` on its station and offset)
+    right, left = corridor.bounds_at(sl[0, 0])
+    if not (0.0 <= sl[0, 0] <= corridor.length and right <= sl[0, 1] <= left):
+        raise TrajectoryError(
+            f"start ({start[0]:.2f}, {start[1]:.2f}) is off the road "
+            f"(station {corridor.offset + sl[0, 0]:.1f} m, lateral offset {sl[0, 1]:.2f} m)")
+    s0, vs = float(sl[0, 0]), sl[1:, 0]
+    if float(vs[-1] - s0) <= 1e-6:
+        raise TrajectoryError("the roadmap ends at or behind the vehicle: no curve to follow")
+    lines = _vertex_lines(roadmap, corridor, distinct, sl[1:], params.band_fraction,
+                          params.band_reserve)
+    # the control points stand at the bands' centres (the roadmap vertices, except where
+    # the band reserve moved them off an interval's end)
+    moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
+    pts = pts.copy()
+    pts[moved] = lines[0][moved] + lines[3][moved, None] * lines[2][moved]
+    return VertexFrame(start, pts, s0, vs, lines)
+
+
 def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float | None,
-                    params: TrajectoryParams, start_speed: float, smooth: bool = False
-                    ) -> tuple[FloatArray, NDArray[np.int64]]:
+                    params: TrajectoryParams, start_speed: float, smooth: bool = False,
+                    frame: VertexFrame | None = None) -> tuple[FloatArray, NDArray[np.int64]]:
     """Candidate control points ``(c, 2)`` and how often the first curve uses each (0 or 1).
 
     The candidates are the vehicle's position, a heading point ahead of it and the roadmap
@@ -63,49 +118,34 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     those that stand in line, and long legs are split in pieces that grow gradually from
     the short legs beside them (:func:`_leg_splits`): the first curve then turns as gently
     as the bands allow, which a junction turn needs.
+
+    ``frame``: the roadmap's :func:`vertex_frame` (computed here if ``None``; both
+    polygons of one roadmap share it).
     """
     rp = roadmap.params
-    raw = np.asarray(roadmap.xy, dtype=float)
-    if raw.ndim != 2 or raw.shape[1] != 2 or len(raw) < 2:
-        raise TrajectoryError(f"a trajectory needs at least 2 roadmap points, got {len(raw)}")
-    distinct = np.concatenate(([True], np.hypot(*np.diff(raw, axis=0).T) > 1e-6))
-    pts = raw[distinct]
-    if len(pts) < 2:
-        raise TrajectoryError(f"a trajectory needs at least 2 roadmap points, got {len(pts)}")
-    start = np.asarray(roadmap.start_xy, dtype=float).reshape(2)
-    sl = corridor.to_sl(np.vstack((start, pts)))
-    if not corridor.contains(start[None])[0]:
-        raise TrajectoryError(
-            f"start ({start[0]:.2f}, {start[1]:.2f}) is off the road "
-            f"(station {corridor.offset + sl[0, 0]:.1f} m, lateral offset {sl[0, 1]:.2f} m)")
+    if frame is None:
+        frame = vertex_frame(roadmap, corridor, params)
     if start_heading is not None and not np.isfinite(start_heading):
         raise TrajectoryError(f"start heading must be finite, got {start_heading!r}")
-    s0, vs = float(sl[0, 0]), sl[1:, 0]
+    start, pts, s0, vs, lines = frame.start, frame.pts, frame.s0, frame.vs, frame.lines
     reach = float(vs[-1] - s0)
-    if reach <= 1e-6:
-        raise TrajectoryError("the roadmap ends at or behind the vehicle: no curve to follow")
-    lines = _vertex_lines(roadmap, corridor, distinct, sl[1:], params.band_fraction,
-                          params.band_reserve)
-    # the control points stand at the bands' centres (the roadmap vertices, except where
-    # the band reserve moved them off an interval's end)
-    moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
-    pts = pts.copy()
-    pts[moved] = lines[0][moved] + lines[3][moved, None] * lines[2][moved]
     lead = max(params.lead_in_lengths * rp.vehicle_length, params.lead_in_time * start_speed)
     lead = min(lead, 0.5 * reach)
     head_len = max(min(lead / 2.0, reach / 3.0), 1e-3)
     ahead = vs > s0 + head_len + rp.d / 2.0
     ahead[-1] = True
-    verts = pts[ahead]
-    lines = tuple(a[ahead] for a in lines)  # type: ignore[assignment]
-    first = int(np.searchsorted(vs[ahead], s0 + lead - 1e-9))
+    verts, vst = pts[ahead], vs[ahead]
+    lines = tuple(a[ahead] for a in lines)
+    first = int(np.searchsorted(vst, s0 + lead - 1e-9))
     first = min(first, len(verts) - 1)
     if not smooth:
+        ends = _band_ends(verts, lines[0], lines[2], lines[3], lines[4])
         # from the vehicle's position as far as the bands allow
         cap = int(np.searchsorted(polyline_stations(verts), params.max_control_spacing
                                   - float(np.hypot(*(verts[0] - start))), side="right")) - 1
         if cap >= 0:
-            first = max(first, _farthest(start, -1, cap, verts, *lines))
+            first = max(first, _farthest_from(float(start[0]), float(start[1]), -1, cap, ends,
+                                              lines[0], lines[1], _TOL))
     if start_heading is None:
         direction = verts[first] - start
     else:
@@ -124,37 +164,33 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
             np.concatenate((fixed, centre)), SMOOTH_CENTRE_WEIGHT)[2:]
         verts = verts.copy()
         verts[first:] = origin + lat[:, None] * normal
-        centre, half = lat, np.minimum(half, SMOOTH_TOLERANCE)
-    kept = first + band_simplify(verts[first:], origin, tangent, normal, centre, half)
+        ends = _band_ends(verts[first:], origin, normal, lat,
+                          np.minimum(half, SMOOTH_TOLERANCE))
+    else:
+        ends = ends[first:]
+    kept = first + _simplify(ends, origin, tangent)
     # long legs get extra control points on them (they stay within the bands)
-    vst = vs[ahead]
-    legs = np.column_stack((np.concatenate(([first], kept[:-1])), kept))
-    leg_len = np.hypot(*(verts[legs[:, 1]] - verts[legs[:, 0]]).T)
-    extra_xy, extra_s = [], []
-    for j, (a, b) in enumerate(legs.tolist()):
-        if a == b:
-            continue
-        if smooth:
-            f = _leg_splits(float(leg_len[j]), float(leg_len[j - 1]) if j > 0 else np.inf,
-                            float(leg_len[j + 1]) if j + 1 < len(legs) else np.inf,
-                            params.max_control_spacing, LEG_GROWTH)
-        else:
-            pieces = int(np.ceil(leg_len[j] / params.max_control_spacing - 1e-9))
-            f = np.arange(1, pieces) / max(pieces, 1)
-        if len(f) == 0:
-            continue
-        extra_xy.append(verts[a] + f[:, None] * (verts[b] - verts[a]))
-        extra_s.append(vst[a] + f * (vst[b] - vst[a]))
-    counts = np.zeros(len(verts), dtype=np.int64)
-    counts[kept] = 1
-    if extra_xy:
-        ex = np.concatenate(extra_xy)
-        es = np.concatenate(extra_s)
-        at = np.searchsorted(vst, es, side="right")
-        verts = np.insert(verts, at, ex, axis=0)
-        counts = np.insert(counts, at, 1)
-    pool = np.vstack((start, heading_point, verts))
-    return pool, np.concatenate(([1, 1], counts)).astype(np.int64)
+    legs_a = np.concatenate(([first], kept[:-1]))
+    leg_len = np.hypot(*(verts[kept] - verts[legs_a]).T)
+    f, leg = _leg_fractions(leg_len, legs_a == kept, params.max_control_spacing, LEG_GROWTH,
+                            smooth)
+    a, b = legs_a[leg], kept[leg]
+    ex = verts[a] + f[:, None] * (verts[b] - verts[a])
+    at = np.searchsorted(vst, vst[a] + f * (vst[b] - vst[a]), side="right")
+    # the extra points go before the vertices at ``at`` (in their order where they share
+    # one), behind the vehicle's position and the heading point
+    order = np.argsort(at, kind="stable")
+    new = 2 + at[order] + np.arange(len(at))
+    old = np.ones(len(verts) + len(at) + 2, dtype=bool)
+    old[:2] = False
+    old[new] = False
+    pool = np.empty((len(old), 2))
+    pool[0], pool[1] = start, heading_point
+    pool[old] = verts
+    pool[new] = ex[order]
+    counts = (~old).astype(np.int64)
+    counts[np.flatnonzero(old)[kept]] = 1
+    return pool, counts
 
 
 # ---- least bending ---------------------------------------------------------------------
@@ -168,105 +204,278 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
 
     Equation (3) moves a point to its neighbours' mean, which drives exactly this sum down;
     this is its fixed point within the bands, found at once: the Hessian is banded
-    (pentadiagonal), solved by banded Cholesky, first in a primal-dual active-set loop
-    (fast, usually exact), then in a primal active-set loop that ends at the optimum.
+    (pentadiagonal, :func:`_bending_system`), solved by banded factorisation, first in a
+    primal-dual active-set loop (fast, usually exact), then in a primal active-set loop
+    that ends at the optimum (:func:`_min_bending_loops`).
     """
-    from scipy.linalg import solveh_banded
-
     m = len(origin)
     if m < 3:
         return np.clip(centre, lo, hi)
-    # second differences D (m - 2, m) for uneven spacing (curvature-like, weighted by the
-    # length each one stands for); M = D^T D is pentadiagonal
-    h = np.maximum(np.hypot(*np.diff(origin, axis=0).T), 1e-3)
-    w = np.sqrt(2.0 / (h[:-1] + h[1:]))  # 2 / (h0 + h1) * sqrt((h0 + h1) / 2)
-    coef = np.column_stack((w / h[:-1], -w * (1.0 / h[:-1] + 1.0 / h[1:]), w / h[1:]))
-    m0 = np.zeros(m)
-    m1 = np.zeros(m - 1)
-    for a in range(3):
-        m0[a:m - 2 + a] += coef[:, a] ** 2
-    for a in range(2):
-        m1[a:m - 2 + a] += coef[:, a] * coef[:, a + 1]
-    m2 = coef[:, 0] * coef[:, 2]
-    nn1 = np.einsum("ij,ij->i", normal[:-1], normal[1:])
-    nn2 = np.einsum("ij,ij->i", normal[:-2], normal[2:])
-    n0 = np.einsum("ij,ij->i", normal, normal)
-    # (a tiny ridge keeps the system definite where nothing else pins the offsets down)
-    h0, h1, h2 = m0 * n0 + weight + 1e-9, m1 * nn1, m2 * nn2
-    second = (coef[:, 0, None] * origin[:-2] + coef[:, 1, None] * origin[1:-1]
-              + coef[:, 2, None] * origin[2:])  # D @ origin
-    dt = np.zeros((m, 2))  # D^T @ second
-    dt[:-2] += coef[:, 0, None] * second
-    dt[1:-1] += coef[:, 1, None] * second
-    dt[2:] += coef[:, 2, None] * second
-    g = np.einsum("ij,ij->i", normal, dt) - weight * centre
-
-    def hess(x: FloatArray) -> FloatArray:
-        y = h0 * x
-        y[:-1] += h1 * x[1:]
-        y[1:] += h1 * x[:-1]
-        y[:-2] += h2 * x[2:]
-        y[2:] += h2 * x[:-2]
-        return y
-
-    fixed = lo >= hi
-
-    def solve(at_lo: NDArray[np.bool_], at_hi: NDArray[np.bool_]) -> FloatArray:
-        """Minimum with the offsets in ``at_lo`` / ``at_hi`` held at those bounds (by a
-        stiff penalty, which keeps the system banded)."""
-        act = at_lo | at_hi
-        ab = np.zeros((3, m))
-        ab[2] = h0 + _PIN * act
-        ab[1, 1:] = h1
-        ab[0, 2:] = h2
-        rhs = -g + _PIN * np.where(at_lo, lo, np.where(at_hi, hi, 0.0))
-        return solveh_banded(ab, rhs, lower=False, check_finite=False)
-
-    # primal-dual active set: fast, usually exact, but not guaranteed to settle
-    at_lo = np.zeros(m, dtype=bool)
-    at_hi = fixed.copy()
-    for _ in range(max_rounds):
-        x = solve(at_lo, at_hi)
-        grad = hess(x) + g
-        new_lo = ((at_lo & (grad >= 0)) | (x < lo - 1e-9)) & ~fixed
-        new_hi = ((at_hi & (grad <= 0)) | (x > hi + 1e-9)) & ~new_lo | fixed
-        if np.array_equal(new_lo, at_lo) and np.array_equal(new_hi, at_hi):
-            break
-        at_lo, at_hi = new_lo, new_hi
-    # primal active set from there: each step stays within the bounds and lowers the
-    # objective, so it ends at the optimum
-    x = np.clip(x, lo, hi)
-    at_lo = (x <= lo) & ~fixed
-    at_hi = (x >= hi) | fixed
-    for _ in range(4 * m + 10):
-        y = solve(at_lo, at_hi)
-        free = ~(at_lo | at_hi)
-        out = free & ((y < lo) | (y > hi))
-        if not out.any():
-            x = np.where(free, y, x)
-            grad = hess(x) + g
-            wrong = np.where(at_lo, -grad, 0.0) + np.where(at_hi & ~fixed, grad, 0.0)
-            i = int(np.argmax(wrong))
-            if wrong[i] <= 1e-9 * (1.0 + float(np.abs(grad).max())):
-                break
-            at_lo[i] = at_hi[i] = False
-            continue
-        d = y - x
-        with np.errstate(divide="ignore", invalid="ignore"):
-            room = np.where(d < 0, (lo - x) / d, np.where(d > 0, (hi - x) / d, np.inf))
-        room = np.where(free, np.clip(room, 0.0, None), np.inf)
-        j = int(np.argmin(room))
-        x = np.where(free, x + min(float(room[j]), 1.0) * d, x)
-        at_lo[j], at_hi[j] = d[j] < 0, d[j] > 0
-    return np.clip(x, lo, hi)
+    f64 = (np.ascontiguousarray(a, dtype=float) for a in (origin, normal, centre, lo, hi))
+    origin, normal, centre, lo, hi = f64
+    h0, h1, h2, g = _bending_system(origin, normal, centre, float(weight))
+    x, ok = _min_bending_loops(h0, h1, h2, g, lo, hi, int(max_rounds))
+    if not ok:
+        raise np.linalg.LinAlgError("the least-bending system is not positive definite")
+    return x
 
 
 #: Stiffness that holds an offset at its bound in :func:`min_bending_offsets`.
 _PIN = 1e8
 
 
+@njit(cache=True)
+def _bending_system(origin: FloatArray, normal: FloatArray, centre: FloatArray, weight: float
+                    ) -> tuple[FloatArray, ...]:  # pragma: no cover - compiled
+    """The quadratic objective of :func:`min_bending_offsets` in the offsets (``m >= 3``):
+    the diagonal ``h0`` ``(m,)``, the off-diagonals ``h1`` ``(m - 1,)`` and ``h2``
+    ``(m - 2,)`` of its pentadiagonal Hessian, and its gradient ``g`` ``(m,)`` at zero.
+
+    The second differences ``D`` ``(m - 2, m)`` of the points for uneven spacing are
+    curvature-like, weighted by the length each one stands for; the Hessian is
+    ``N^T D^T D N`` (``N``: the normals) plus ``weight`` and a tiny ridge that keeps it
+    definite where nothing else pins the offsets down.
+    """
+    m = len(origin)
+    c0, c1, c2 = np.empty(m - 2), np.empty(m - 2), np.empty(m - 2)
+    for r in range(m - 2):
+        ha = max(np.hypot(origin[r + 1, 0] - origin[r, 0], origin[r + 1, 1] - origin[r, 1]),
+                 1e-3)
+        hb = max(np.hypot(origin[r + 2, 0] - origin[r + 1, 0],
+                          origin[r + 2, 1] - origin[r + 1, 1]), 1e-3)
+        w = np.sqrt(2.0 / (ha + hb))  # 2 / (ha + hb) * sqrt((ha + hb) / 2)
+        c0[r], c1[r], c2[r] = w / ha, -w * (1.0 / ha + 1.0 / hb), w / hb
+    h0, h1, h2, g = np.zeros(m), np.zeros(m - 1), np.empty(m - 2), np.empty(m)
+    dtx, dty = np.zeros(m), np.zeros(m)
+    for r in range(m - 2):
+        h0[r] += c0[r] * c0[r]
+        h0[r + 1] += c1[r] * c1[r]
+        h0[r + 2] += c2[r] * c2[r]
+        h1[r] += c0[r] * c1[r]
+        h1[r + 1] += c1[r] * c2[r]
+        h2[r] = c0[r] * c2[r] * (normal[r, 0] * normal[r + 2, 0]
+                                 + normal[r, 1] * normal[r + 2, 1])
+        # D @ origin, then D^T of it
+        sx = c0[r] * origin[r, 0] + c1[r] * origin[r + 1, 0] + c2[r] * origin[r + 2, 0]
+        sy = c0[r] * origin[r, 1] + c1[r] * origin[r + 1, 1] + c2[r] * origin[r + 2, 1]
+        dtx[r] += c0[r] * sx
+        dty[r] += c0[r] * sy
+        dtx[r + 1] += c1[r] * sx
+        dty[r + 1] += c1[r] * sy
+        dtx[r + 2] += c2[r] * sx
+        dty[r + 2] += c2[r] * sy
+    for k in range(m):
+        h0[k] = (h0[k] * (normal[k, 0] * normal[k, 0] + normal[k, 1] * normal[k, 1])
+                 + weight + 1e-9)
+        g[k] = normal[k, 0] * dtx[k] + normal[k, 1] * dty[k] - weight * centre[k]
+    for k in range(m - 1):
+        h1[k] *= normal[k, 0] * normal[k + 1, 0] + normal[k, 1] * normal[k + 1, 1]
+    return h0, h1, h2, g
+
+
+@njit(cache=True)
+def _hess(h0: FloatArray, h1: FloatArray, h2: FloatArray, x: FloatArray
+          ) -> FloatArray:  # pragma: no cover - compiled
+    """The pentadiagonal matrix (diagonal ``h0``, first and second off-diagonals ``h1``,
+    ``h2``) times ``x``."""
+    m = len(x)
+    y = h0 * x
+    for k in range(m - 1):
+        y[k] += h1[k] * x[k + 1]
+        y[k + 1] += h1[k] * x[k]
+    for k in range(m - 2):
+        y[k] += h2[k] * x[k + 2]
+        y[k + 2] += h2[k] * x[k]
+    return y
+
+
+@njit(cache=True)
+def _pinned_solve(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatArray,
+                  lo: FloatArray, hi: FloatArray, at_lo: NDArray[np.bool_],
+                  at_hi: NDArray[np.bool_], start: int, fac: FloatArray, x: FloatArray
+                  ) -> bool:  # pragma: no cover - compiled
+    """Minimum ``x`` of ``x H x / 2 + g x`` with the offsets in ``at_lo`` / ``at_hi`` held at
+    those bounds by a stiff penalty (:data:`_PIN`); ``False`` if the system is not positive
+    definite.
+
+    ``fac`` ``(5, m)`` holds the factorisation ``L D L^T`` of the pentadiagonal system
+    (``D``, the two subdiagonals of ``L``), ``w = L^-1 b`` and ``D^-1 w``; its columns
+    before ``start`` are those of the previous call (the first offset whose pin changed
+    since: the factorisation runs from the first row on).
+    """
+    m = len(h0)
+    dd, l1, l2, w, z = fac[0], fac[1], fac[2], fac[3], fac[4]
+    for j in range(start, m):
+        a = h0[j]
+        b = -g[j]
+        if at_lo[j]:
+            a += _PIN
+            b += _PIN * lo[j]
+        elif at_hi[j]:
+            a += _PIN
+            b += _PIN * hi[j]
+        c = h1[j] if j + 1 < m else 0.0
+        if j >= 1:
+            t = l1[j - 1] * dd[j - 1]
+            a -= l1[j - 1] * t
+            c -= l2[j - 1] * t
+            b -= l1[j - 1] * w[j - 1]
+        if j >= 2:
+            t = l2[j - 2] * dd[j - 2]
+            a -= l2[j - 2] * t
+            b -= l2[j - 2] * w[j - 2]
+        if not a > 0.0:
+            return False
+        dd[j] = a
+        w[j] = b
+        z[j] = b / a
+        if j + 1 < m:
+            l1[j] = c / a
+        if j + 2 < m:
+            l2[j] = h2[j] / a
+    for j in range(m - 1, -1, -1):
+        v = z[j]
+        if j + 1 < m:
+            v -= l1[j] * x[j + 1]
+        if j + 2 < m:
+            v -= l2[j] * x[j + 2]
+        x[j] = v
+    return True
+
+
+@njit(cache=True)
+def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatArray,
+                       lo: FloatArray, hi: FloatArray, max_rounds: int
+                       ) -> tuple[FloatArray, bool]:  # pragma: no cover - compiled
+    """The active-set loops of :func:`min_bending_offsets` on its pentadiagonal Hessian
+    (``h0``, ``h1``, ``h2``) and gradient at zero ``g``: the offsets and whether every
+    system was positive definite."""
+    m = len(h0)
+    fixed = lo >= hi
+    fac = np.zeros((5, m))
+    # primal-dual active set: fast, usually exact, but not guaranteed to settle
+    at_lo = np.zeros(m, dtype=np.bool_)
+    at_hi = fixed.copy()
+    x = np.zeros(m)
+    start = 0
+    for _ in range(max_rounds):
+        if not _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi, start, fac, x):
+            return x, False
+        grad = _hess(h0, h1, h2, x) + g
+        start = m
+        for k in range(m):
+            new_lo = ((at_lo[k] and grad[k] >= 0) or x[k] < lo[k] - 1e-9) and not fixed[k]
+            new_hi = (((at_hi[k] and grad[k] <= 0) or x[k] > hi[k] + 1e-9) and not new_lo
+                      ) or fixed[k]
+            if (new_lo != at_lo[k] or new_hi != at_hi[k]) and start == m:
+                start = k
+            at_lo[k], at_hi[k] = new_lo, new_hi
+        if start == m:
+            break
+    # primal active set from there: each step stays within the bounds and lowers the
+    # objective, so it ends at the optimum
+    start = 0
+    for k in range(m):
+        x[k] = min(max(x[k], lo[k]), hi[k])
+        at_lo[k] = x[k] <= lo[k] and not fixed[k]
+        at_hi[k] = x[k] >= hi[k] or fixed[k]
+    y = np.empty(m)
+    for _ in range(4 * m + 10):
+        if not _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi, start, fac, y):
+            return x, False
+        out = False
+        for k in range(m):
+            if not (at_lo[k] or at_hi[k]) and (y[k] < lo[k] or y[k] > hi[k]):
+                out = True
+                break
+        if not out:
+            for k in range(m):
+                if not (at_lo[k] or at_hi[k]):
+                    x[k] = y[k]
+            grad = _hess(h0, h1, h2, x) + g
+            i, worst, big = 0, -np.inf, 0.0
+            for k in range(m):
+                w = 0.0
+                if at_lo[k]:
+                    w += -grad[k]
+                if at_hi[k] and not fixed[k]:
+                    w += grad[k]
+                if w > worst:
+                    i, worst = k, w
+                big = max(big, abs(grad[k]))
+            if worst <= 1e-9 * (1.0 + big):
+                break
+            at_lo[i] = at_hi[i] = False
+            start = i
+            continue
+        j, room_j = 0, np.inf
+        for k in range(m):
+            if at_lo[k] or at_hi[k]:
+                continue
+            dk = y[k] - x[k]
+            if dk < 0:
+                r = max((lo[k] - x[k]) / dk, 0.0)
+            elif dk > 0:
+                r = max((hi[k] - x[k]) / dk, 0.0)
+            else:
+                r = np.inf
+            if r < room_j:
+                j, room_j = k, r
+        t = min(room_j, 1.0)
+        dj = y[j] - x[j]
+        for k in range(m):
+            if not (at_lo[k] or at_hi[k]):
+                x[k] = x[k] + t * (y[k] - x[k])
+        at_lo[j], at_hi[j] = dj < 0, dj > 0
+        start = j
+    for k in range(m):
+        x[k] = min(max(x[k], lo[k]), hi[k])
+    return x, True
+
+
+@njit(cache=True)
+def _leg_fractions(leg_len: FloatArray, empty: NDArray[np.bool_], cap: float, ratio: float,
+                   smooth: bool) -> tuple[FloatArray, NDArray[np.int64]]:  # pragma: no cover
+    """Fractions ``(k,)`` at which to split the control polygon's legs of lengths ``leg_len``
+    [m] (none of the ``empty`` ones), and the leg of each: pieces of at most ``cap`` [m],
+    and with ``smooth`` as :func:`_leg_splits` grows them."""
+    n = len(leg_len)
+    frac = np.empty(0)
+    leg = np.empty(0, dtype=np.int64)
+    parts = []
+    owners = []
+    for j in range(n):
+        if empty[j]:
+            continue
+        if smooth:
+            before = leg_len[j - 1] if j > 0 else np.inf
+            after = leg_len[j + 1] if j + 1 < n else np.inf
+            f = _leg_splits(leg_len[j], before, after, cap, ratio)
+        else:
+            pieces = int(np.ceil(leg_len[j] / cap - 1e-9))
+            f = np.empty(max(pieces - 1, 0))
+            for k in range(1, pieces):
+                f[k - 1] = k / max(pieces, 1)
+        if len(f):
+            parts.append(f)
+            owners.append(j)
+    total = 0
+    for f in parts:
+        total += len(f)
+    frac = np.empty(total)
+    leg = np.empty(total, dtype=np.int64)
+    at = 0
+    for q in range(len(parts)):
+        f = parts[q]
+        frac[at:at + len(f)] = f
+        leg[at:at + len(f)] = owners[q]
+        at += len(f)
+    return frac, leg
+
+
+@njit(cache=True)
 def _leg_splits(length: float, before: float, after: float, cap: float, ratio: float
-                ) -> FloatArray:
+                ) -> FloatArray:  # pragma: no cover - compiled
     """Fractions ``(k,)`` of a control-polygon leg of ``length`` [m] at which to split it so
     that no piece is longer than ``cap`` [m] nor ``ratio`` times its neighbour: pieces grow
     geometrically from the legs ``before`` and ``after`` it (their lengths [m]).
@@ -274,7 +483,8 @@ def _leg_splits(length: float, before: float, after: float, cap: float, ratio: f
     A uniform B-spline turns within its shortest legs, so a short leg beside a long one
     gives a sharp bend that the control polygon does not have.
     """
-    cuts_a, cuts_b = [], []
+    cuts_a = []
+    cuts_b = []
     pos, step = 0.0, min(max(ratio * before, 0.5), cap)
     while pos + step < length / 2.0:
         pos += step
@@ -285,12 +495,21 @@ def _leg_splits(length: float, before: float, after: float, cap: float, ratio: f
         pos -= step
         cuts_b.append(pos)
         step = min(step * ratio, cap)
-    lo = cuts_a[-1] if cuts_a else 0.0
-    hi = cuts_b[-1] if cuts_b else length
+    lo = cuts_a[-1] if len(cuts_a) else 0.0
+    hi = cuts_b[-1] if len(cuts_b) else length
     mid = int(np.ceil((hi - lo) / cap - 1e-9))
-    cuts = np.concatenate((cuts_a, lo + (hi - lo) * np.arange(1, mid) / max(mid, 1),
-                           cuts_b[::-1]))
-    return np.asarray(cuts, dtype=float) / length
+    out = np.empty(len(cuts_a) + max(mid - 1, 0) + len(cuts_b))
+    n = 0
+    for c in cuts_a:
+        out[n] = c / length
+        n += 1
+    for k in range(1, mid):
+        out[n] = (lo + (hi - lo) * k / max(mid, 1)) / length
+        n += 1
+    for q in range(len(cuts_b) - 1, -1, -1):
+        out[n] = cuts_b[q] / length
+        n += 1
+    return out
 
 
 # ---- band simplification ---------------------------------------------------------------
@@ -345,82 +564,81 @@ def band_simplify(points: ArrayLike, origin: ArrayLike, tangent: ArrayLike, norm
     pts = np.asarray(points, dtype=float)
     org, tan, nrm, cen, hlf = (np.asarray(a, dtype=float)
                                for a in (origin, tangent, normal, centre, half))
-    m = len(pts)
+    return _simplify(_band_ends(pts, org, nrm, cen, hlf), org, tan)
+
+
+#: Angular tolerance [rad] of band simplification's test.
+_TOL = 1e-9
+
+
+def _simplify(ends: FloatArray, origin: FloatArray, tangent: FloatArray) -> NDArray[np.int64]:
+    """:func:`band_simplify` of the vertices with the band ends ``ends`` (:func:`_band_ends`),
+    on lines through ``origin`` ``(m, 2)``, the road's direction there ``tangent`` ``(m, 2)``."""
+    m = len(ends)
     if m <= 2:
         return np.arange(m, dtype=np.int64)
-    kept = [0]
-    i = 0
-    ends = _band_ends(pts, org, nrm, cen, hlf)
-    while i < m - 1:
-        i = _farthest(pts[i], i, m - 1, pts, org, tan, nrm, cen, hlf, ends=ends)
-        kept.append(i)
-    return np.asarray(kept, dtype=np.int64)
-
-
-def _farthest(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
-              tangent: FloatArray, normal: FloatArray, centre: FloatArray, half: FloatArray,
-              tol: float = 1e-9, ends: FloatArray | None = None) -> int:
-    """Largest ``j`` in ``(i, cap]`` (at least ``i + 1``) such that every segment
-    ``p -> pts[j']``, ``i < j' <= j``, crosses the lines ``i < k < j'`` inside their bands.
-
-    The rays from ``p`` that meet band ``k`` form the angle between its two ends (seen
-    from ``p``, relative to the road's direction at ``k``); a segment ``p -> pts[j]``
-    crosses every band before ``j`` if its direction lies in all their angles (running
-    maximum of the lower and minimum of the upper ends), and reaches each line ``k < j``
-    as the lines do not cross.
-    """
-    if cap <= i + 1:
-        return min(i + 1, len(pts) - 1)
-    # the test is a running one: a window of candidates gives the same answer as all of
-    # them unless every candidate in it passes, then a window four times as long
-    window = 32
-    if ends is None:
-        ends = _band_ends(pts, origin, normal, centre, half)
-    while True:
-        end = min(cap, i + window)
-        j = _farthest_upto(p, i, end, pts, origin, tangent, normal, centre, half, tol, ends)
-        if j < end or end == cap:
-            return j
-        window *= 4
+    return _band_simplify_loop(ends, np.ascontiguousarray(origin, dtype=float),
+                               np.ascontiguousarray(tangent, dtype=float), _TOL)
 
 
 def _band_ends(pts: FloatArray, origin: FloatArray, normal: FloatArray, centre: FloatArray,
                half: FloatArray) -> FloatArray:
     """Per vertex ``(m, 3, 2)``: the lower and the upper end of its band, and the vertex."""
-    return np.stack((origin + (centre - half)[:, None] * normal,
-                     origin + (centre + half)[:, None] * normal, pts), axis=1)
+    return np.ascontiguousarray(
+        np.stack((origin + (centre - half)[:, None] * normal,
+                  origin + (centre + half)[:, None] * normal, pts), axis=1), dtype=float)
 
 
-def _farthest_upto(p: FloatArray, i: int, cap: int, pts: FloatArray, origin: FloatArray,
-                   tangent: FloatArray, normal: FloatArray, centre: FloatArray,
-                   half: FloatArray, tol: float, ends: FloatArray | None = None) -> int:
-    """:func:`_farthest` over all candidates ``(i, cap]`` at once (``ends``: the
-    :func:`_band_ends` of all vertices, computed here if ``None``)."""
-    ks = slice(i + 1, cap + 1)
-    ref = tangent[i + 1] if i + 1 < len(tangent) else tangent[-1]
-    c, s = ref[0], ref[1]
-    if ends is None:
-        ends = _band_ends(pts, origin, normal, centre, half)
-    # directions (relative to the road's) from p to both band ends and to the vertex
-    q = ends[ks]
-    dx, dy = q[..., 0] - p[0], q[..., 1] - p[1]
-    ang = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
-    a1, a2, th = ang[:, 0], ang[:, 1], ang[:, 2]
-    lo, hi = np.minimum(a1, a2), np.maximum(a1, a2)
-    # a line through p itself does not constrain the direction
-    o, t = origin[ks], tangent[ks]
-    on = np.abs((o[:, 0] - p[0]) * t[:, 0] + (o[:, 1] - p[1]) * t[:, 1]) < 1e-9
-    lo[on], hi[on] = -np.inf, np.inf
-    # bounds from the lines strictly before each candidate
-    low, high = np.empty(len(lo)), np.empty(len(hi))
-    low[0], high[0] = -np.inf, np.inf
-    np.maximum.accumulate(lo[:-1], out=low[1:])
-    np.minimum.accumulate(hi[:-1], out=high[1:])
-    good = (th >= low - tol) & (th <= high + tol)
-    good[0] = True
-    if good.all():
-        return cap
-    return int(i + np.argmin(good))
+@njit(cache=True)
+def _farthest_from(px: float, py: float, i: int, cap: int, ends: FloatArray,
+                   origin: FloatArray, tangent: FloatArray, tol: float
+                   ) -> int:  # pragma: no cover - compiled
+    """Largest ``j`` in ``(i, cap]`` (at least ``i + 1``) such that every segment from
+    ``(px, py)`` to vertex ``j' <= j`` crosses the lines ``i < k < j'`` inside their bands
+    (``ends``: :func:`_band_ends`).
+
+    The rays from the point that meet band ``k`` form the angle between its two ends (seen
+    from the point, relative to the road's direction at ``i + 1``); a segment to vertex
+    ``j`` crosses every band before ``j`` if its direction lies in all their angles (running
+    maximum of the lower and minimum of the upper ends, within ``tol`` [rad]), and reaches
+    each line ``k < j`` as the lines do not cross. A line through the point itself does
+    not constrain the direction.
+    """
+    m = len(ends)
+    if cap <= i + 1:
+        return min(i + 1, m - 1)
+    ref = i + 1 if i + 1 < m else m - 1
+    c, s = tangent[ref, 0], tangent[ref, 1]
+    low, high = -np.inf, np.inf
+    for k in range(i + 1, cap + 1):
+        dx, dy = ends[k, 2, 0] - px, ends[k, 2, 1] - py
+        th = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+        if k > i + 1 and not (th >= low - tol and th <= high + tol):
+            return k - 1
+        if abs((origin[k, 0] - px) * tangent[k, 0] + (origin[k, 1] - py) * tangent[k, 1]) < 1e-9:
+            continue
+        dx, dy = ends[k, 0, 0] - px, ends[k, 0, 1] - py
+        a1 = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+        dx, dy = ends[k, 1, 0] - px, ends[k, 1, 1] - py
+        a2 = np.arctan2(-dx * s + dy * c, dx * c + dy * s)
+        low = max(low, min(a1, a2))
+        high = min(high, max(a1, a2))
+    return cap
+
+
+@njit(cache=True)
+def _band_simplify_loop(ends: FloatArray, origin: FloatArray, tangent: FloatArray, tol: float
+                        ) -> NDArray[np.int64]:  # pragma: no cover - compiled
+    """The vertices that :func:`band_simplify` keeps (``ends``: :func:`_band_ends`)."""
+    m = len(ends)
+    kept = np.empty(m, dtype=np.int64)
+    kept[0] = 0
+    n, i = 1, 0
+    while i < m - 1:
+        i = _farthest_from(ends[i, 2, 0], ends[i, 2, 1], i, m - 1, ends, origin, tangent, tol)
+        kept[n] = i
+        n += 1
+    return kept[:n].copy()
 
 
 # ---- detour ----------------------------------------------------------------------------
@@ -469,8 +687,7 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     vid = np.full((n_lines, nb), -1, dtype=np.int64)
     b_lo = np.ceil((lo_v - h / 2 - l0) / h - 1e-9).astype(np.int64)
     b_hi = np.floor((hi_v + h / 2 - l0) / h + 1e-9).astype(np.int64)
-    for v in range(n_v):
-        vid[line[v], b_lo[v]:b_hi[v] + 1] = v
+    _fill_bins(vid, line, b_lo, b_hi)
     lv = np.clip(grid[None, :], lo_v[vid], hi_v[vid])
     near = np.minimum(lv - lo_v[vid], hi_v[vid] - lv)
     penalty = np.where(vid >= 0, np.maximum(_DETOUR_CLEAR - near, 0.0) ** 2, np.inf)
@@ -479,7 +696,6 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     ds = np.maximum(np.diff(st), 1e-6)
     r = int(np.floor(rate * float(ds.max()) / h + 1e-9))
     dlt = np.arange(-r, r + 1)
-    frm = np.arange(nb)[:, None] - dlt[None, :]
     # arcs as tables per pair of lines, (lines - 1, P + 1, P + 1), over each vertex's index
     # on its line (P: none, never connected)
     by_line = np.argsort(line, kind="stable")
@@ -492,34 +708,18 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     table[line[arcs[:, 0]], loc[arcs[:, 0]], loc[arcs[:, 1]]] = True
     lid = np.full((n_lines, nb + 2 * r), n_loc)  # padded by r bins of none on each side
     lid[:, r:r + nb] = np.where(vid >= 0, loc[vid], n_loc)
-    # flat index into the tables: (line, from, to)
-    flat = lid[:-1][:, frm + r]
-    flat += (n_loc + 1) * np.arange(n_lines - 1)[:, None, None]
-    flat *= n_loc + 1
-    flat += lid[1:, r:r + nb, None]
-    ok = table.ravel()[flat]
-    ok &= np.abs(dlt)[None, None, :] * h <= rate * ds[:, None, None] + 1e-9
-    lat_cost = (dlt[None, :] * h) ** 2 / ds[:, None]  # (lines - 1, 2r + 1)
-    step_cost = np.where(ok, lat_cost[:, None, :], np.inf)  # (lines - 1, nb, 2r + 1)
-    frm_c = np.clip(frm, 0, nb - 1)
+    # moves within the rate and their lateral cost, (lines - 1, 2r + 1)
+    within = np.abs(dlt)[None, :] * h <= rate * ds[:, None] + 1e-9
+    lat_cost = (dlt[None, :] * h) ** 2 / ds[:, None]
     # start: the source vertex, at the vehicle's offset
     src = int(roadmap.path[0])
     l_start = float(corridor.to_sl(np.asarray(roadmap.start_xy, dtype=float)[None])[0, 1])
     cost = np.where(vid[0] == src, np.abs(grid - l_start), np.inf)
     cost = np.where(cost <= np.min(cost) + 1e-9, penalty[0], np.inf)
-    back = np.zeros((n_lines, nb), dtype=np.int64)
-    rows = np.arange(nb)
-    for k in range(n_lines - 1):
-        cand = cost[frm_c] + step_cost[k]
-        j = np.argmin(cand, axis=1)
-        cost = cand[rows, j] + penalty[k + 1]
-        back[k + 1] = j
+    cost, back = _detour_sweep(cost, penalty, lid, table, within, lat_cost, r)
     if not np.isfinite(cost).any():
         return None
-    bins = np.zeros(n_lines, dtype=np.int64)
-    bins[-1] = int(np.argmin(cost))
-    for k in range(n_lines - 1, 0, -1):
-        bins[k - 1] = frm_c[bins[k], back[k, bins[k]]]
+    bins = _detour_bins(back, int(np.argmin(cost)), r)
     ks = np.arange(n_lines)
     path = vid[ks, bins]
     lat = lv[ks, bins]
@@ -530,3 +730,60 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
                    bottleneck_width=float(width[j]), bottleneck_index=j,
                    length=float(polyline_stations(xy)[-1]), path=path,
                    links=np.zeros((0, 2, 2)))
+
+
+@njit(cache=True)
+def _fill_bins(vid: NDArray[np.int64], line: NDArray[np.int64], b_lo: NDArray[np.int64],
+               b_hi: NDArray[np.int64]) -> None:  # pragma: no cover - compiled
+    """Writes vertex ``v`` into ``vid[line[v], b_lo[v]:b_hi[v] + 1]``, vertex after vertex."""
+    for v in range(len(line)):
+        for b in range(max(b_lo[v], 0), min(b_hi[v] + 1, vid.shape[1])):
+            vid[line[v], b] = v
+
+
+@njit(cache=True)
+def _detour_sweep(cost: FloatArray, penalty: FloatArray, lid: NDArray[np.int64],
+                  table: NDArray[np.bool_], within: NDArray[np.bool_], lat_cost: FloatArray,
+                  r: int) -> tuple[FloatArray, NDArray[np.int64]]:  # pragma: no cover
+    """:func:`detour_roadmap`'s dynamic programme over the lines.
+
+    From the costs ``(nb,)`` on the first line, bin ``b`` of line ``k + 1`` takes the
+    cheapest move ``b - dlt -> b`` (``dlt = d - r``, ``d < 2r + 1``; the first of equal
+    ones) that is ``within[k, d]`` the rate and follows an arc: ``table[k, p, q]`` of the
+    bins' vertices' places ``lid[k, b - dlt + r]``, ``lid[k + 1, b + r]`` on their lines
+    (``lid`` ``(lines, nb + 2r)`` padded by ``r`` bins of none on each side); the move costs
+    ``lat_cost[k, d]``, the bin its ``penalty[k + 1, b]``. Returns the costs on the last line
+    and the move ``d`` taken into each bin ``(lines, nb)``.
+    """
+    n_lines, nb = penalty.shape
+    w = 2 * r + 1
+    back = np.zeros((n_lines, nb), dtype=np.int64)
+    for k in range(n_lines - 1):
+        new = np.empty(nb)
+        for b in range(nb):
+            to = lid[k + 1, b + r]
+            j, best = 0, np.inf
+            for d in range(w):
+                f = b - (d - r)
+                if not (within[k, d] and table[k, lid[k, f + r], to]):
+                    continue
+                c = cost[min(max(f, 0), nb - 1)] + lat_cost[k, d]
+                if c < best:
+                    j, best = d, c
+            new[b] = best + penalty[k + 1, b]
+            back[k + 1, b] = j
+        cost = new
+    return cost, back
+
+
+@njit(cache=True)
+def _detour_bins(back: NDArray[np.int64], last: int, r: int
+                 ) -> NDArray[np.int64]:  # pragma: no cover - compiled
+    """The bins ``(lines,)`` of :func:`_detour_sweep`'s moves back from bin ``last`` of the
+    last line."""
+    n_lines, nb = back.shape
+    bins = np.zeros(n_lines, dtype=np.int64)
+    bins[-1] = last
+    for k in range(n_lines - 1, 0, -1):
+        bins[k - 1] = min(max(bins[k] - (back[k, bins[k]] - r), 0), nb - 1)
+    return bins
