@@ -72,7 +72,14 @@ import numpy as np
 from numpy.typing import ArrayLike
 from scipy.interpolate import BSpline
 
-from splineplan.control_polygon import _control_points, _sharp_bend, _steep, detour_roadmap
+from splineplan.control_polygon import (
+    VertexFrame,
+    _control_points,
+    _sharp_bend,
+    _steep,
+    detour_roadmap,
+    vertex_frame,
+)
 from splineplan.corridor import Corridor
 from splineplan.curvature import curvature_discrete, curvature_from_derivatives
 from splineplan.errors import ParameterError, TrajectoryError
@@ -253,11 +260,12 @@ def plan_trajectory(
     if not (np.isfinite(start_speed) and start_speed >= 0):
         raise TrajectoryError(f"start speed must be >= 0, got {start_speed!r}")
     smooth = _sharp_bend(roadmap, corridor, params)
+    frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
-                      end_speed, smooth)
+                      end_speed, smooth, frame)
     if not traj.feasible:
         other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
-                           end_speed, not smooth)
+                           end_speed, not smooth, frame)
         log.debug("first control polygon gives no feasible curve; the other: %s",
                   other.feasible)
         traj = other if other.feasible else traj
@@ -274,12 +282,14 @@ def plan_trajectory(
 
 def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                params: TrajectoryParams, start_heading: float | None, start_speed: float,
-               end_speed: float | None, smooth: bool = False) -> Trajectory:
+               end_speed: float | None, smooth: bool = False,
+               frame: VertexFrame | None = None) -> Trajectory:
     """:func:`plan_trajectory` along the roadmap's chosen path (``smooth``: from the
-    least-bending control polygon, see :func:`_control_points`)."""
+    least-bending control polygon, see :func:`_control_points`; ``frame``: the roadmap's
+    :func:`~splineplan.control_polygon.vertex_frame`, computed here if ``None``)."""
     rp = roadmap.params
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
-                                   smooth)
+                                   smooth, frame=frame)
     checker = _Checker.build(corridor, obstacles, rp, pool)
     curve, refinements, doubled, samples = _refine(pool, counts, checker, params)
     opt = _Optimiser(curve, checker, params, samples)
