@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import REFERENCE_SPACING, Corridor
@@ -283,6 +284,11 @@ class _Lines:
     inflation: float
 
 
+def _f64(a: ArrayLike) -> FloatArray:
+    """A contiguous float64 array (the one array type the compiled loops take)."""
+    return np.ascontiguousarray(a, dtype=float)
+
+
 def _check_start(corridor: Corridor, s0: float, l0: float) -> None:
     tol = 1e-6
     if s0 < -tol or s0 > corridor.length + tol:
@@ -340,7 +346,8 @@ def _sweep_lines(corridor: Corridor, stations: FloatArray, r: float, *,
 def _cull(
     seg_a: FloatArray, seg_b: FloatArray, bbox: FloatArray, r: float
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Pairs (segment, obstacle) whose bounding boxes come within ``r`` of each other.
+    """Pairs (segment, obstacle) whose bounding boxes come within ``r`` of each other,
+    sorted by segment, then obstacle.
 
     Obstacles are sorted along the axis on which the segments spread most; each segment
     tests only the obstacles whose extent on that axis can reach it.
@@ -355,16 +362,38 @@ def _cull(
     reach = float(np.max(bbox[:, ax + 2] - bbox[:, ax]))
     first = np.searchsorted(bmin, lo[:, ax] - reach, side="left")
     last = np.searchsorted(bmin, hi[:, ax], side="right")
-    count = np.maximum(last - first, 0)
-    i = np.repeat(np.arange(len(lo)), count)
-    j = order[np.repeat(first, count) + np.arange(len(i))
-              - np.repeat(np.cumsum(count) - count, count)]
-    b = bbox[j]
-    hit = ((lo[i, 0] <= b[:, 2]) & (hi[i, 0] >= b[:, 0])
-           & (lo[i, 1] <= b[:, 3]) & (hi[i, 1] >= b[:, 1]))
-    i, j = i[hit], j[hit]
-    srt = np.lexsort((j, i))
-    return i[srt].astype(np.int64), j[srt].astype(np.int64)
+    return _cull_kernel(np.ascontiguousarray(lo), np.ascontiguousarray(hi),
+                        np.ascontiguousarray(bbox, dtype=float), order.astype(np.int64),
+                        first.astype(np.int64), last.astype(np.int64))
+
+
+@njit(cache=True)
+def _cull_kernel(lo: FloatArray, hi: FloatArray, bbox: FloatArray, order: NDArray[np.int64],
+                 first: NDArray[np.int64], last: NDArray[np.int64]
+                 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover - compiled
+    """The box test of :func:`_cull` on segment ``i``'s candidates ``order[first:last]``."""
+    n = len(lo)
+    total = 0
+    for i in range(n):
+        total += max(last[i] - first[i], 0)
+    out_i = np.empty(total, dtype=np.int64)
+    out_j = np.empty(total, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        start = m
+        for c in range(first[i], last[i]):
+            j = order[c]
+            if (lo[i, 0] <= bbox[j, 2] and hi[i, 0] >= bbox[j, 0]
+                    and lo[i, 1] <= bbox[j, 3] and hi[i, 1] >= bbox[j, 1]):
+                # insertion keeps the segment's obstacles sorted
+                k = m
+                while k > start and out_j[k - 1] > j:
+                    out_j[k] = out_j[k - 1]
+                    k -= 1
+                out_j[k] = j
+                out_i[m] = i
+                m += 1
+    return out_i[:m], out_j[:m]
 
 
 def _expand_edges(
@@ -378,46 +407,6 @@ def _expand_edges(
     return group[rep], edge
 
 
-def _slab(a: FloatArray, b: FloatArray, lo: FloatArray | float,
-          hi: FloatArray | float) -> tuple[FloatArray, FloatArray]:
-    """Solutions v of ``lo <= a + b v <= hi`` as intervals (empty: lower > upper)."""
-    flat = np.abs(b) < 1e-12
-    bb = np.where(flat, 1.0, b)
-    x1, x2 = (lo - a) / bb, (hi - a) / bb
-    inside = (a >= lo) & (a <= hi)
-    low = np.where(flat, np.where(inside, -np.inf, np.inf), np.minimum(x1, x2))
-    high = np.where(flat, np.where(inside, np.inf, -np.inf), np.maximum(x1, x2))
-    return low, high
-
-
-def _capsule_on_line(
-    ua: FloatArray, va: FloatArray, ub: FloatArray, vb: FloatArray, r: float
-) -> tuple[FloatArray, FloatArray]:
-    """Where the line ``u = 0`` comes within ``r`` of segments ``(ua, va) -> (ub, vb)``.
-
-    Returns ``v`` bounds of one closed interval per segment (lower > upper: no contact).
-    The capsule is convex, so its trace is the hull of the traces of its three parts.
-    """
-    lo = np.full(len(ua), np.inf)
-    hi = np.full(len(ua), -np.inf)
-    for u, v in ((ua, va), (ub, vb)):
-        h2 = r * r - u * u
-        ok = h2 >= 0
-        h = np.sqrt(np.where(ok, h2, 0.0))
-        lo = np.where(ok, np.minimum(lo, v - h), lo)
-        hi = np.where(ok, np.maximum(hi, v + h), hi)
-    du, dv = ub - ua, vb - va
-    ln = np.hypot(du, dv)
-    good = ln > 0
-    lns = np.where(good, ln, 1.0)
-    eu, ev = du / lns, dv / lns
-    l1, h1 = _slab(ua * ev - eu * va, eu, -r, r)  # distance across the segment
-    l2, h2 = _slab(-ua * eu - ev * va, ev, 0.0, ln)  # projection onto the segment
-    sl, sh = np.maximum(l1, l2), np.minimum(h1, h2)
-    ok = good & (sl <= sh)
-    return np.where(ok, np.minimum(lo, sl), lo), np.where(ok, np.maximum(hi, sh), hi)
-
-
 def _free_intervals(
     lines: _Lines, obstacles: Obstacles, r: float
 ) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
@@ -427,68 +416,160 @@ def _free_intervals(
     boundary (the union of its edges' capsules) and the points inside it.
     """
     open_line = lines.hi >= lines.lo
-    b_line = np.zeros(0, dtype=np.int64)
-    b_lo = b_hi = np.zeros(0)
+    li = ob = np.zeros(0, dtype=np.int64)
     if len(obstacles):
         a_xy = lines.center + np.minimum(lines.lo, lines.hi)[:, None] * lines.normal
         b_xy = lines.center + lines.hi[:, None] * lines.normal
         li, ob = _cull(a_xy, b_xy, obstacles.bbox, r)
         keep = open_line[li]
         li, ob = li[keep], ob[keep]
-        pl, edge = _expand_edges(li, ob, obstacles.offsets)
-        start, end, owner = polygon_edges(obstacles.vertices, obstacles.offsets)
-        c, t, n = lines.center[pl], lines.tangent[pl], lines.normal[pl]
-        wa, wb = start[edge] - c, end[edge] - c
-        ua = wa[:, 0] * t[:, 0] + wa[:, 1] * t[:, 1]
-        va = wa[:, 0] * n[:, 0] + wa[:, 1] * n[:, 1]
-        ub = wb[:, 0] * t[:, 0] + wb[:, 1] * t[:, 1]
-        vb = wb[:, 0] * n[:, 0] + wb[:, 1] * n[:, 1]
-        cap_lo, cap_hi = _capsule_on_line(ua, va, ub, vb, r)
-        # interior: pair up the boundary crossings of each (line, polygon) along the line
-        cross = (ua > 0) != (ub > 0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            vc = va + (0.0 - ua) * (vb - va) / (ub - ua)
-        cl, co, cv = pl[cross], owner[edge][cross], vc[cross]
-        order = np.lexsort((cv, co, cl))
-        cl, cv = cl[order], cv[order]
-        even = np.arange(0, len(cv), 2)
-        b_line = np.concatenate((pl, cl[even]))
-        b_lo = np.concatenate((cap_lo, cv[even]))
-        b_hi = np.concatenate((cap_hi, cv[even + 1]))
-    lo_k, hi_k = lines.lo[b_line], lines.hi[b_line]
-    # blocked sets are open intervals; only those that cut into [lo, hi] matter
-    keep = (b_hi > b_lo) & (b_hi > lo_k) & (b_lo < hi_k)
-    b_line, b_lo, b_hi = b_line[keep], b_lo[keep], b_hi[keep]
-    lo_k, hi_k = lo_k[keep], hi_k[keep]
     span = float(np.max(lines.hi - lines.lo, initial=0.0)) + 4.0
-    rel_lo = np.clip(b_lo - lo_k, -1.0, None)
-    rel_hi = np.clip(b_hi - lo_k, None, hi_k - lo_k + 1.0)
-    order = np.lexsort((rel_lo, b_line))
-    b_line, rel_lo, rel_hi = b_line[order], rel_lo[order], rel_hi[order]
-    base = b_line * span
-    run = np.maximum.accumulate(rel_hi + base) if len(base) else base.astype(float)
-    prev = np.concatenate(([-np.inf], run[:-1]))
-    prev_end = np.maximum(prev - base, 0.0)  # free from here (relative to lo) ...
-    gap = rel_lo - prev_end  # ... up to the next blocked interval's start
-    g = gap >= 0
-    f_line = [b_line[g]]
-    f_lo = [prev_end[g] + lines.lo[b_line[g]]]
-    f_hi = [rel_lo[g] + lines.lo[b_line[g]]]
-    # the stretch after each line's last blocked interval, and lines without any
-    last = np.ones(len(b_line), dtype=bool)
-    last[:-1] = b_line[1:] != b_line[:-1]
-    tail_line = b_line[last]
-    tail_lo = np.maximum(run[last] - base[last], 0.0) + lines.lo[tail_line]
-    tail_hi = lines.hi[tail_line]
-    none = np.setdiff1d(np.flatnonzero(open_line), tail_line)
-    f_line += [tail_line, none]
-    f_lo += [tail_lo, lines.lo[none]]
-    f_hi += [tail_hi, lines.hi[none]]
-    fl, flo, fhi = np.concatenate(f_line), np.concatenate(f_lo), np.concatenate(f_hi)
-    ok = fhi >= flo
-    fl, flo, fhi = fl[ok], flo[ok], fhi[ok]
-    order = np.lexsort((flo, fl))
-    return fl[order].astype(np.int64), flo[order], fhi[order]
+    c, t, n = lines.center, lines.tangent, lines.normal
+    vert = obstacles.vertices
+    return _free_kernel(
+        li, ob, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
+        np.ascontiguousarray(t[:, 0]), np.ascontiguousarray(t[:, 1]),
+        np.ascontiguousarray(n[:, 0]), np.ascontiguousarray(n[:, 1]),
+        _f64(lines.lo), _f64(lines.hi), _f64(vert[:, 0]), _f64(vert[:, 1]),
+        np.asarray(obstacles.offsets, dtype=np.int64), float(r), span)
+
+
+@njit(cache=True)
+def _slab(a: float, b: float, lo: float,
+          hi: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Solutions v of ``lo <= a + b v <= hi`` as an interval (empty: lower > upper)."""
+    if abs(b) < 1e-12:
+        if a >= lo and a <= hi:
+            return -np.inf, np.inf
+        return np.inf, -np.inf
+    x1, x2 = (lo - a) / b, (hi - a) / b
+    return min(x1, x2), max(x1, x2)
+
+
+@njit(cache=True)
+def _capsule_on_line(ua: float, va: float, ub: float, vb: float,
+                     r: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Where the line ``u = 0`` comes within ``r`` of the segment ``(ua, va) -> (ub, vb)``.
+
+    Returns the ``v`` bounds of a closed interval (lower > upper: no contact). The capsule
+    is convex, so its trace is the hull of the traces of its three parts.
+    """
+    lo = np.inf
+    hi = -np.inf
+    h2 = r * r - ua * ua
+    if h2 >= 0:
+        h = np.sqrt(h2)
+        lo = min(lo, va - h)
+        hi = max(hi, va + h)
+    h2 = r * r - ub * ub
+    if h2 >= 0:
+        h = np.sqrt(h2)
+        lo = min(lo, vb - h)
+        hi = max(hi, vb + h)
+    du, dv = ub - ua, vb - va
+    ln = np.hypot(du, dv)
+    if ln > 0:
+        eu, ev = du / ln, dv / ln
+        l1, h1 = _slab(ua * ev - eu * va, eu, -r, r)  # distance across the segment
+        l2, h2 = _slab(-ua * eu - ev * va, ev, 0.0, ln)  # projection onto the segment
+        sl, sh = max(l1, l2), min(h1, h2)
+        if sl <= sh:
+            lo = min(lo, sl)
+            hi = max(hi, sh)
+    return lo, hi
+
+
+@njit(cache=True)
+def _free_kernel(li: NDArray[np.int64], ob: NDArray[np.int64], cx: FloatArray, cy: FloatArray,
+                 tx: FloatArray, ty: FloatArray, nx: FloatArray, ny: FloatArray,
+                 lo: FloatArray, hi: FloatArray, vx: FloatArray, vy: FloatArray,
+                 offsets: NDArray[np.int64], r: float, span: float
+                 ) -> tuple[NDArray[np.int64], FloatArray,
+                            FloatArray]:  # pragma: no cover - compiled
+    """Free intervals of the lines given the (line, obstacle) pairs ``li``, ``ob`` (sorted
+    by line, then obstacle) that can block them; see :func:`_free_intervals`.
+
+    Per line, blocked are the edges' capsules (in pair and edge order) and, between
+    pairs of the polygon's boundary crossings sorted along the line, its interior; they
+    are sorted by their start (stable) and merged, and the gaps between them are free.
+    """
+    nline = len(lo)
+    npair = len(li)
+    nedge = 0
+    for p in range(npair):
+        nedge += offsets[ob[p] + 1] - offsets[ob[p]]
+    cap = nline + 2 * nedge + 1
+    f_line = np.empty(cap, dtype=np.int64)
+    f_lo = np.empty(cap)
+    f_hi = np.empty(cap)
+    nf = 0
+    b_lo = np.empty(2 * nedge + 1)
+    b_hi = np.empty(2 * nedge + 1)
+    rel_lo = np.empty(2 * nedge + 1)
+    rel_hi = np.empty(2 * nedge + 1)
+    cross = np.empty(nedge + 1)
+    run = -np.inf
+    p = 0
+    for k in range(nline):
+        p0 = p
+        while p < npair and li[p] == k:
+            p += 1
+        if hi[k] < lo[k]:
+            continue
+        lo_k, hi_k = lo[k], hi[k]
+        nb = 0
+        for q in range(p0, p):  # the capsules
+            for e in range(offsets[ob[q]], offsets[ob[q] + 1]):
+                e1 = e + 1 if e + 1 < offsets[ob[q] + 1] else offsets[ob[q]]
+                wax, way = vx[e] - cx[k], vy[e] - cy[k]
+                wbx, wby = vx[e1] - cx[k], vy[e1] - cy[k]
+                ua = wax * tx[k] + way * ty[k]
+                va = wax * nx[k] + way * ny[k]
+                ub = wbx * tx[k] + wby * ty[k]
+                vb = wbx * nx[k] + wby * ny[k]
+                b_lo[nb], b_hi[nb] = _capsule_on_line(ua, va, ub, vb, r)
+                nb += 1
+        for q in range(p0, p):  # the interiors
+            nc = 0
+            for e in range(offsets[ob[q]], offsets[ob[q] + 1]):
+                e1 = e + 1 if e + 1 < offsets[ob[q] + 1] else offsets[ob[q]]
+                wax, way = vx[e] - cx[k], vy[e] - cy[k]
+                wbx, wby = vx[e1] - cx[k], vy[e1] - cy[k]
+                ua = wax * tx[k] + way * ty[k]
+                ub = wbx * tx[k] + wby * ty[k]
+                if (ua > 0) != (ub > 0):
+                    va = wax * nx[k] + way * ny[k]
+                    vb = wbx * nx[k] + wby * ny[k]
+                    cross[nc] = va + (0.0 - ua) * (vb - va) / (ub - ua)
+                    nc += 1
+            cv = np.sort(cross[:nc])
+            for c in range(0, nc - 1, 2):
+                b_lo[nb], b_hi[nb] = cv[c], cv[c + 1]
+                nb += 1
+        # blocked sets are open intervals; only those that cut into [lo, hi] matter
+        m = 0
+        for i in range(nb):
+            if b_hi[i] > b_lo[i] and b_hi[i] > lo_k and b_lo[i] < hi_k:
+                rel_lo[m] = max(b_lo[i] - lo_k, -1.0)
+                rel_hi[m] = min(b_hi[i] - lo_k, hi_k - lo_k + 1.0)
+                m += 1
+        if m == 0:
+            f_line[nf], f_lo[nf], f_hi[nf] = k, lo_k, hi_k
+            nf += 1
+            continue
+        order = np.argsort(rel_lo[:m], kind="mergesort")
+        base = k * span
+        for i in order:
+            prev_end = max(run - base, 0.0)  # free from here (relative to lo) ...
+            if rel_lo[i] - prev_end >= 0 and rel_lo[i] + lo_k >= prev_end + lo_k:
+                f_line[nf], f_lo[nf], f_hi[nf] = k, prev_end + lo_k, rel_lo[i] + lo_k
+                nf += 1  # ... up to the next blocked interval's start
+            run = max(run, rel_hi[i] + base)
+        tail = max(run - base, 0.0) + lo_k  # after the line's last blocked interval
+        if hi_k >= tail:
+            f_line[nf], f_lo[nf], f_hi[nf] = k, tail, hi_k
+            nf += 1
+    return f_line[:nf].copy(), f_lo[:nf].copy(), f_hi[:nf].copy()
 
 
 def _ragged_pairs(
@@ -717,43 +798,77 @@ def _search(
     through vertices at least as wide as the capped optimum. Returns the path's vertices
     and arcs (or None, None) and the last line that some path reaches.
     """
-    nv = len(width)
-    order = np.argsort(vline[arcs[:, 0]], kind="stable") if len(arcs) else np.zeros(0, int)
-    a_from = arcs[order, 0].tolist()
-    a_to = arcs[order, 1].tolist()
-    a_len = arc_len[order].tolist()
-    w = width.tolist()
-    best = [-math.inf] * nv
+    order = (np.argsort(vline[arcs[:, 0]], kind="stable") if len(arcs)
+             else np.zeros(0, dtype=np.int64))
+    a_from = np.ascontiguousarray(arcs[order, 0], dtype=np.int64)
+    a_to = np.ascontiguousarray(arcs[order, 1], dtype=np.int64)
+    path, steps, reached = _search_kernel(
+        int(source), a_from, a_to, np.ascontiguousarray(arc_len[order], dtype=float),
+        order.astype(np.int64), np.ascontiguousarray(width, dtype=float),
+        np.ascontiguousarray(vline, dtype=np.int64), int(nline), float(wmax))
+    if reached < nline - 1:
+        return None, None, int(reached)
+    return path, steps, nline - 1
+
+
+@njit(cache=True)
+def _search_kernel(source: int, a_from: NDArray[np.int64], a_to: NDArray[np.int64],
+                   a_len: FloatArray, a_idx: NDArray[np.int64], w: FloatArray,
+                   vline: NDArray[np.int64], nline: int, wmax: float
+                   ) -> tuple[NDArray[np.int64], NDArray[np.int64],
+                              int]:  # pragma: no cover - compiled
+    """:func:`_search` over arcs in topological order (``a_idx``: their indices in the
+    caller's arcs). Returns the path's vertices, its arcs and the last line reached (the
+    path is empty when that is not the last line)."""
+    nv = len(w)
+    best = np.full(nv, -np.inf)
     best[source] = w[source]
-    for u, v in zip(a_from, a_to, strict=True):
+    for e in range(len(a_from)):
+        u, v = a_from[e], a_to[e]
         bu = best[u]
         if bu > best[v]:
             cand = bu if bu < w[v] else w[v]
             if cand > best[v]:
                 best[v] = cand
-    best_arr = np.asarray(best)
-    goal_line = vline == nline - 1
-    if not np.any(goal_line & np.isfinite(best_arr)):
-        reached = vline[np.isfinite(best_arr)]
-        return None, None, int(reached.max()) if len(reached) else -1
-    target = min(float(best_arr[goal_line].max()), wmax)
-    dist = [math.inf] * nv
-    pred = [-1] * nv
+    top = -np.inf
+    reached = -1
+    for v in range(nv):
+        if np.isfinite(best[v]):
+            reached = max(reached, vline[v])
+            if vline[v] == nline - 1 and best[v] > top:
+                top = best[v]
+    empty = np.zeros(0, dtype=np.int64)
+    if reached < nline - 1 or not np.isfinite(top):
+        return empty, empty, reached
+    target = min(top, wmax)
+    dist = np.full(nv, np.inf)
+    pred = np.full(nv, -1, dtype=np.int64)
     dist[source] = 0.0
-    a_idx = order.tolist()
-    for u, v, ln, e in zip(a_from, a_to, a_len, a_idx, strict=True):
-        if w[v] >= target and dist[u] + ln < dist[v]:
-            dist[v] = dist[u] + ln
+    for e in range(len(a_from)):
+        u, v = a_from[e], a_to[e]
+        if w[v] >= target and dist[u] + a_len[e] < dist[v]:
+            dist[v] = dist[u] + a_len[e]
             pred[v] = e
-    dist_arr = np.where(goal_line, np.asarray(dist), np.inf)
-    v = int(np.argmin(dist_arr))
-    path, steps = [v], []
+    end = -1
+    d_end = np.inf
+    for v in range(nv):
+        if vline[v] == nline - 1 and (end < 0 or dist[v] < d_end):
+            end, d_end = v, dist[v]
+    n = 1
+    v = end
     while pred[v] >= 0:
-        steps.append(pred[v])
-        v = int(arcs[pred[v], 0])
-        path.append(v)
-    return (np.asarray(path[::-1], dtype=np.int64), np.asarray(steps[::-1], dtype=np.int64),
-            nline - 1)
+        v = a_from[pred[v]]
+        n += 1
+    path = np.empty(n, dtype=np.int64)
+    steps = np.empty(n - 1, dtype=np.int64)
+    v = end
+    path[n - 1] = v
+    for i in range(n - 2, -1, -1):
+        e = pred[v]
+        steps[i] = a_idx[e]
+        v = a_from[e]
+        path[i] = v
+    return path, steps, reached
 
 
 def _raise_blocked(corridor: Corridor, stations: FloatArray, line: int) -> None:
