@@ -624,52 +624,101 @@ def _arcs(
     ia, ib = _ragged_pairs(vline[in_tail], vline[vline > 0] - 1, nband)
     head = np.flatnonzero(in_tail)[ia]
     tail = np.flatnonzero(vline > 0)[ib]
-    band = vline[head]
-    culled = _band_edges(lines, obstacles, r, nband)
-
-    def point(line: NDArray[np.int64], lat: FloatArray) -> FloatArray:
-        return np.asarray(lines.center[line] + lat[:, None] * lines.normal[line])
-
-    lo_a, hi_a, lo_b, hi_b = vlo[head], vhi[head], vlo[tail], vhi[tail]
-    found = np.zeros(len(head), dtype=bool)
-    link = np.zeros((len(head), 2, 2))
-    tries: list[tuple[FloatArray, FloatArray, NDArray[np.bool_]]] = [
-        ((lo_a + hi_a) / 2.0, (lo_b + hi_b) / 2.0, np.ones(len(head), dtype=bool))]
-    c_lo, c_hi = np.maximum(lo_a, lo_b), np.minimum(hi_a, hi_b)
-    common = c_hi >= c_lo
-    for f in _OVERLAP_TRIES:
-        lat = c_lo + f * (c_hi - c_lo)
-        tries.append((lat, lat, common))
-    for f in _PROPORTIONAL_TRIES:
-        tries.append((lo_a + f * (hi_a - lo_a), lo_b + f * (hi_b - lo_b),
-                      np.ones(len(head), dtype=bool)))
+    band = vline[head].astype(np.int64)
+    be, edge = _band_edges(lines, obstacles, r, nband)
+    start, end, _ = polygon_edges(obstacles.vertices, obstacles.offsets)
+    geo = (_f64(lines.center[:, 0]), _f64(lines.center[:, 1]), _f64(lines.normal[:, 0]),
+           _f64(lines.normal[:, 1]), _f64(vlo[head]), _f64(vhi[head]), _f64(vlo[tail]),
+           _f64(vhi[tail]), band, _TRIES)
+    edges = (np.searchsorted(be, np.arange(nband + 1)).astype(np.int64),
+             _f64(start[edge, 0]), _f64(start[edge, 1]), _f64(end[edge, 0]),
+             _f64(end[edge, 1]))
     bent = _bent_bands(corridor, lines.station)
     # first the midpoints, then every other try at once for the arcs still missing
-    la, lb, _ = tries[0]
-    p, q = point(band, la), point(band + 1, lb)
-    direct = _links_free(corridor, lines, culled, bent, obstacles, band, p, q, r)
-    found[:] = direct
+    npair = len(head)
+    idx0 = np.arange(npair, dtype=np.int64)
+    p, q, clear = _links_kernel(idx0, np.zeros(npair, dtype=np.int64), *geo, *edges, float(r))
+    direct = clear & _within_road(corridor, lines, bent, band, p, q, need=clear)
+    found = direct.copy()
+    link = np.zeros((npair, 2, 2))
     link[direct, 0], link[direct, 1] = p[direct], q[direct]
     rest = np.flatnonzero(~direct)
     if len(rest):
-        la = np.stack([t[0][rest] for t in tries[1:]])  # (tries, pairs)
-        lb = np.stack([t[1][rest] for t in tries[1:]])
-        valid = np.stack([t[2][rest] for t in tries[1:]])
+        valid = np.ones((len(_TRIES) - 1, len(rest)), dtype=bool)
+        lo_a, hi_a, lo_b, hi_b = vlo[head[rest]], vhi[head[rest]], vlo[tail[rest]], vhi[tail[rest]]
+        valid[:len(_OVERLAP_TRIES)] = np.minimum(hi_a, hi_b) >= np.maximum(lo_a, lo_b)
         ti, pi = np.nonzero(valid)
         idx = rest[pi]
-        p, q = point(band[idx], la[ti, pi]), point(band[idx] + 1, lb[ti, pi])
-        ok = _links_free(corridor, lines, culled, bent, obstacles, band[idx], p, q, r)
-        # the first free try of each arc (tries are in order within each arc)
-        order = np.lexsort((ti[ok], idx[ok]))
-        got, first = np.unique(idx[ok][order], return_index=True)
-        sel = np.flatnonzero(ok)[order][first]
+        p, q, clear = _links_kernel(idx, (ti + 1).astype(np.int64), *geo, *edges, float(r))
+        ok = clear & _within_road(corridor, lines, bent, band[idx], p, q, need=clear)
+        # the first free try of each arc (tries come in order within each arc)
+        sel = _first_per_arc(idx, ok, npair)
+        got = idx[sel]
         found[got] = True
         link[got, 0], link[got, 1] = p[sel], q[sel]
     pairs = np.column_stack((head[found], tail[found])).astype(np.int64)
-    mid_a = point(band[found], (lo_a[found] + hi_a[found]) / 2.0)
-    mid_b = point(band[found] + 1, (lo_b[found] + hi_b[found]) / 2.0)
+    mid_a = lines.center[band[found]] + ((vlo[head[found]] + vhi[head[found]]) / 2.0)[:, None] \
+        * lines.normal[band[found]]
+    mid_b = lines.center[band[found] + 1] + ((vlo[tail[found]] + vhi[tail[found]]) / 2.0)[:, None] \
+        * lines.normal[band[found] + 1]
     seg = mid_b - mid_a
     return _Arcs(pairs, np.hypot(seg[:, 0], seg[:, 1]), direct[found], link[found])
+
+
+#: Every try of :func:`_arcs` as (kind, fraction): 0 the midpoints, 1 constant lateral
+#: offset across the common range, 2 the same fraction of both intervals.
+_TRIES = np.array([(0.0, 0.0)] + [(1.0, f) for f in _OVERLAP_TRIES]
+                  + [(2.0, f) for f in _PROPORTIONAL_TRIES])
+
+
+@njit(cache=True)
+def _first_per_arc(idx: NDArray[np.int64], ok: NDArray[np.bool_],
+                   n: int) -> NDArray[np.int64]:  # pragma: no cover - compiled
+    """Positions of the first ``ok`` candidate of each arc ``idx``, by arc."""
+    first = np.full(n, -1, dtype=np.int64)
+    for c in range(len(idx)):
+        if ok[c] and first[idx[c]] < 0:
+            first[idx[c]] = c
+    return first[first >= 0]
+
+
+@njit(cache=True)
+def _links_kernel(idx: NDArray[np.int64], tri: NDArray[np.int64], cx: FloatArray,
+                  cy: FloatArray, nx: FloatArray, ny: FloatArray, lo_a: FloatArray,
+                  hi_a: FloatArray, lo_b: FloatArray, hi_b: FloatArray,
+                  band: NDArray[np.int64], tries: FloatArray, e_first: NDArray[np.int64],
+                  ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray,
+                  r: float) -> tuple[FloatArray, FloatArray,
+                                     NDArray[np.bool_]]:  # pragma: no cover - compiled
+    """Links ``p -> q`` ``(n, 2)`` of try ``tri`` of arcs ``idx``, and whether each keeps
+    ``r`` from the obstacle edges ``a -> b`` near its band (edges of band k:
+    ``e_first[k]:e_first[k + 1]``); exact segment-to-segment distances."""
+    n = len(idx)
+    p = np.empty((n, 2))
+    q = np.empty((n, 2))
+    clear = np.ones(n, dtype=np.bool_)
+    for c in range(n):
+        i = idx[c]
+        k = band[i]
+        kind, f = tries[tri[c], 0], tries[tri[c], 1]
+        if kind == 0.0:
+            la, lb = (lo_a[i] + hi_a[i]) / 2.0, (lo_b[i] + hi_b[i]) / 2.0
+        elif kind == 1.0:
+            c_lo, c_hi = max(lo_a[i], lo_b[i]), min(hi_a[i], hi_b[i])
+            la = lb = c_lo + f * (c_hi - c_lo)
+        else:
+            la, lb = lo_a[i] + f * (hi_a[i] - lo_a[i]), lo_b[i] + f * (hi_b[i] - lo_b[i])
+        px, py = cx[k] + la * nx[k], cy[k] + la * ny[k]
+        qx, qy = cx[k + 1] + lb * nx[k + 1], cy[k + 1] + lb * ny[k + 1]
+        p[c, 0], p[c, 1], q[c, 0], q[c, 1] = px, py, qx, qy
+        for e in range(e_first[k], e_first[k + 1]):
+            near = (min(px, qx) - r <= max(ax[e], bx[e]) and max(px, qx) + r >= min(ax[e], bx[e])
+                    and min(py, qy) - r <= max(ay[e], by[e])
+                    and max(py, qy) + r >= min(ay[e], by[e]))
+            if near and _segment_distance(px, py, qx, qy, ax[e], ay[e], bx[e], by[e]) < r - _EPS:
+                clear[c] = False
+                break
+    return p, q, clear
 
 
 def _band_edges(
@@ -689,59 +738,29 @@ def _band_edges(
     return be[order], edge[order]
 
 
-def _links_free(
-    corridor: Corridor, lines: _Lines, culled: tuple[NDArray[np.int64], NDArray[np.int64]],
-    bent: NDArray[np.bool_], obstacles: Obstacles, band: NDArray[np.int64], p: FloatArray,
-    q: FloatArray, r: float,
-) -> NDArray[np.bool_]:
-    """Whether segments ``p -> q`` across bands ``band`` keep ``r`` from every obstacle
-    (exact segment-to-edge distances; the ends lie outside every obstacle) and stay on the
-    shrunk road."""
-    ok = np.ones(len(band), dtype=bool)
-    be, edge = culled
-    if len(be) and len(band):
-        order = np.argsort(band, kind="stable")
-        ai, ei = _ragged_pairs(band[order], be, len(lines.lo) - 1)
-        ai = order[ai]
-        start, end, _ = polygon_edges(obstacles.vertices, obstacles.offsets)
-        a, b = start[edge[ei]], end[edge[ei]]
-        pa, qa = p[ai], q[ai]
-        near = ((np.minimum(pa[:, 0], qa[:, 0]) - r <= np.maximum(a[:, 0], b[:, 0]))
-                & (np.maximum(pa[:, 0], qa[:, 0]) + r >= np.minimum(a[:, 0], b[:, 0]))
-                & (np.minimum(pa[:, 1], qa[:, 1]) - r <= np.maximum(a[:, 1], b[:, 1]))
-                & (np.maximum(pa[:, 1], qa[:, 1]) + r >= np.minimum(a[:, 1], b[:, 1])))
-        ai = ai[near]
-        dist = _segment_distance(pa[near], qa[near], a[near], b[near])
-        ok[ai[dist < r - _EPS]] = False
-    return ok & _within_road(corridor, lines, bent, band, p, q)
+@njit(cache=True)
+def _point_segment(px: float, py: float, ax: float, ay: float, bx: float,
+                   by: float) -> float:  # pragma: no cover - compiled
+    """Distance [m] from point ``p`` to segment ``a -> b``."""
+    abx, aby = bx - ax, by - ay
+    apx, apy = px - ax, py - ay
+    den = abx * abx + aby * aby
+    t = min(max((apx * abx + apy * aby) / (den if den > 0 else 1.0), 0.0), 1.0)
+    return float(np.hypot(apx - t * abx, apy - t * aby))
 
 
-def _cross(ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray) -> FloatArray:
-    return np.asarray(ax * by - ay * bx)
-
-
-def _point_segment(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    ab = b - a
-    ap = p - a
-    den = ab[:, 0] ** 2 + ab[:, 1] ** 2
-    t = np.clip((ap[:, 0] * ab[:, 0] + ap[:, 1] * ab[:, 1]) / np.where(den > 0, den, 1.0),
-                0.0, 1.0)
-    dx = ap[:, 0] - t * ab[:, 0]
-    dy = ap[:, 1] - t * ab[:, 1]
-    return np.asarray(np.hypot(dx, dy))
-
-
-def _segment_distance(p: FloatArray, q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    """Distance [m] between segments ``p -> q`` and ``a -> b``, row by row ``(n, 2)``."""
-    d = np.minimum(np.minimum(_point_segment(a, p, q), _point_segment(b, p, q)),
-                   np.minimum(_point_segment(p, a, b), _point_segment(q, a, b)))
-    pq, ab = q - p, b - a
-    o1 = _cross(pq[:, 0], pq[:, 1], a[:, 0] - p[:, 0], a[:, 1] - p[:, 1])
-    o2 = _cross(pq[:, 0], pq[:, 1], b[:, 0] - p[:, 0], b[:, 1] - p[:, 1])
-    o3 = _cross(ab[:, 0], ab[:, 1], p[:, 0] - a[:, 0], p[:, 1] - a[:, 1])
-    o4 = _cross(ab[:, 0], ab[:, 1], q[:, 0] - a[:, 0], q[:, 1] - a[:, 1])
-    proper = (o1 * o2 < 0) & (o3 * o4 < 0)
-    return np.where(proper, 0.0, d)
+@njit(cache=True)
+def _segment_distance(px: float, py: float, qx: float, qy: float, ax: float, ay: float,
+                      bx: float, by: float) -> float:  # pragma: no cover - compiled
+    """Distance [m] between segments ``p -> q`` and ``a -> b``."""
+    d = min(min(_point_segment(ax, ay, px, py, qx, qy), _point_segment(bx, by, px, py, qx, qy)),
+            min(_point_segment(px, py, ax, ay, bx, by), _point_segment(qx, qy, ax, ay, bx, by)))
+    pqx, pqy, abx, aby = qx - px, qy - py, bx - ax, by - ay
+    o1 = pqx * (ay - py) - pqy * (ax - px)
+    o2 = pqx * (by - py) - pqy * (bx - px)
+    o3 = abx * (py - ay) - aby * (px - ax)
+    o4 = abx * (qy - ay) - aby * (qx - ax)
+    return 0.0 if (o1 * o2 < 0) and (o3 * o4 < 0) else d
 
 
 def _bent_bands(corridor: Corridor, stations: FloatArray) -> NDArray[np.bool_]:
@@ -763,19 +782,25 @@ def _bent_bands(corridor: Corridor, stations: FloatArray) -> NDArray[np.bool_]:
 
 def _within_road(
     corridor: Corridor, lines: _Lines, bent: NDArray[np.bool_], band: NDArray[np.int64],
-    p: FloatArray, q: FloatArray,
+    p: FloatArray, q: FloatArray, *, need: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
     """Whether segments ``p -> q`` between lines ``band`` and ``band + 1`` stay on the
     shrunk road. Both ends do by construction; where the reference line and the boundary
     offsets are straight over the band the shrunk road is convex there and nothing is
     left to check; elsewhere the segment is checked at points at most
-    ``REFERENCE_SPACING / 2`` apart."""
+    ``REFERENCE_SPACING / 2`` apart (as many for every segment, the longest setting the
+    spacing); with ``need``, only those segments are checked (the others count as on the
+    road)."""
     ok = np.ones(len(band), dtype=bool)
     sel = np.flatnonzero(bent[band]) if len(band) else np.zeros(0, dtype=np.int64)
     if len(sel) == 0:
         return ok
     gap = float(np.max(np.hypot(*(q[sel] - p[sel]).T)))
     m = max(2, math.ceil(gap / (REFERENCE_SPACING / 2.0)))
+    if need is not None:
+        sel = sel[need[sel]]
+        if len(sel) == 0:
+            return ok
     f = np.arange(1, m) / m
     pts = p[sel, None, :] + f[None, :, None] * (q[sel] - p[sel])[:, None, :]
     sl = corridor.to_sl(pts.reshape(-1, 2))
