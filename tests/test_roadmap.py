@@ -429,3 +429,56 @@ def test_malformed_obstacles_raise() -> None:
         Obstacles.from_polygons([np.array([[0, 0], [1, 0], [np.nan, 1]])])
     with pytest.raises(GeometryError):
         Obstacles.from_boxes([[0.0, 0.0]], [0.0], [-1.0], [1.0])
+
+
+# -- compiled helpers against independent references ---------------------------------------
+def test_segment_distance_matches_shapely() -> None:
+    from splineplan.roadmap import _segment_distance
+
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        p, q, a, b = rng.integers(-3, 4, (4, 2)) * 0.5 + rng.choice([0.0, 1.0]) * rng.normal(
+            0.0, 0.3, (4, 2))  # grid points too: touching, collinear and crossing cases
+        got = _segment_distance(*p, *q, *a, *b)
+        want = LineString([p, q]).distance(LineString([a, b])) if not (
+            np.array_equal(p, q) or np.array_equal(a, b)) else shapely.distance(
+            shapely.Point(p) if np.array_equal(p, q) else LineString([p, q]),
+            shapely.Point(a) if np.array_equal(a, b) else LineString([a, b]))
+        assert got == pytest.approx(want, abs=1e-12)
+
+
+def test_search_is_widest_then_shortest_by_enumeration() -> None:
+    # a layered graph (arcs from line k to k + 1) against all source-to-goal paths
+    from splineplan.roadmap import _search
+
+    rng = np.random.default_rng(2)
+    for _ in range(60):
+        nline = int(rng.integers(2, 6))
+        per = rng.integers(1, 4, nline)
+        vline = np.repeat(np.arange(nline), per).astype(np.int64)
+        width = np.round(rng.uniform(0.0, 5.0, len(vline)), 1)
+        arcs = np.array([(u, v) for u in range(len(vline)) for v in range(len(vline))
+                         if vline[v] == vline[u] + 1 and rng.random() < 0.7],
+                        dtype=np.int64).reshape(-1, 2)
+        arcs = arcs[rng.permutation(len(arcs))]
+        arc_len = np.round(rng.uniform(1.0, 3.0, len(arcs)), 1)
+        wmax = 3.5
+        best = None
+        by_arc = {(int(u), int(v)): e for e, (u, v) in enumerate(arcs)}
+        for combo in itertools.product(*[np.flatnonzero(vline == k) for k in range(1, nline)]):
+            path = (0, *combo)
+            steps = [by_arc.get((int(u), int(v))) for u, v in itertools.pairwise(path)]
+            if None in steps:
+                continue
+            key = (-min(float(width[list(path)].min()), wmax), float(arc_len[steps].sum()))
+            best = key if best is None or key < best else best
+        path, steps, reached = _search(0, arcs, arc_len, width, vline, nline, wmax)
+        if best is None:
+            assert path is None and reached < nline - 1
+            continue
+        assert path is not None and steps is not None and reached == nline - 1
+        np.testing.assert_array_equal(arcs[steps, 0], path[:-1])
+        np.testing.assert_array_equal(arcs[steps, 1], path[1:])
+        assert path[0] == 0 and vline[path[-1]] == nline - 1
+        got = (-min(float(width[path].min()), wmax), float(arc_len[steps].sum()))
+        assert got[0] == best[0] and got[1] == pytest.approx(best[1])
