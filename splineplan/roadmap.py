@@ -620,49 +620,102 @@ def _arcs(
     """
     nline = len(lines.lo)
     nband = max(nline - 1, 0)
-    in_tail = vline < nline - 1
-    ia, ib = _ragged_pairs(vline[in_tail], vline[vline > 0] - 1, nband)
-    head = np.flatnonzero(in_tail)[ia]
-    tail = np.flatnonzero(vline > 0)[ib]
-    band = vline[head].astype(np.int64)
+    vline = np.ascontiguousarray(vline, dtype=np.int64)
+    head, tail = _arc_pairs(vline, nband)
     be, edge = _band_edges(lines, obstacles, r, nband)
     start, end, _ = polygon_edges(obstacles.vertices, obstacles.offsets)
-    geo = (_f64(lines.center[:, 0]), _f64(lines.center[:, 1]), _f64(lines.normal[:, 0]),
-           _f64(lines.normal[:, 1]), _f64(vlo[head]), _f64(vhi[head]), _f64(vlo[tail]),
-           _f64(vhi[tail]), band, _TRIES)
-    edges = (np.searchsorted(be, np.arange(nband + 1)).astype(np.int64),
-             _f64(start[edge, 0]), _f64(start[edge, 1]), _f64(end[edge, 0]),
-             _f64(end[edge, 1]))
+    geo = (head, tail, vline, _f64(vlo), _f64(vhi), _f64(lines.center[:, 0]),
+           _f64(lines.center[:, 1]), _f64(lines.normal[:, 0]), _f64(lines.normal[:, 1]),
+           _TRIES, np.searchsorted(be, np.arange(nband + 1)).astype(np.int64),
+           _f64(start[edge, 0]), _f64(start[edge, 1]), _f64(end[edge, 0]),
+           _f64(end[edge, 1]), float(r))
     bent = _bent_bands(corridor, lines.station)
     # first the midpoints, then every other try at once for the arcs still missing
-    npair = len(head)
-    idx0 = np.arange(npair, dtype=np.int64)
-    p, q, clear = _links_kernel(idx0, np.zeros(npair, dtype=np.int64), *geo, *edges, float(r))
-    direct = clear & _within_road(corridor, lines, bent, band, p, q, need=clear)
-    found = direct.copy()
-    link = np.zeros((npair, 2, 2))
-    link[direct, 0], link[direct, 1] = p[direct], q[direct]
+    band = vline[head]
+    idx0 = np.arange(len(head), dtype=np.int64)
+    p0, q0, clear = _links_kernel(idx0, np.zeros(len(head), dtype=np.int64), *geo)
+    direct = clear & _within_road(corridor, lines, bent, band, p0, q0, need=clear)
+    idx, tri = _retries(direct, *geo[:5], len(_OVERLAP_TRIES), len(_TRIES))
+    p, q, clear = _links_kernel(idx, tri, *geo)
+    ok = clear & _within_road(corridor, lines, bent, band[idx], p, q, need=clear)
+    pairs, length, direct, link = _gather(head, tail, direct, p0, q0, idx, ok, p, q)
+    return _Arcs(pairs, length, direct, link)
+
+
+@njit(cache=True)
+def _arc_pairs(vline: NDArray[np.int64], nband: int) -> tuple[
+        NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover - compiled
+    """Every pair (head, tail) of vertices on lines k and k + 1 ``k < nband`` (vertices
+    sorted by line), by band, then head, then tail."""
+    first = np.searchsorted(vline, np.arange(nband + 2))
+    n = 0
+    for k in range(nband):
+        n += (first[k + 1] - first[k]) * (first[k + 2] - first[k + 1])
+    head = np.empty(n, dtype=np.int64)
+    tail = np.empty(n, dtype=np.int64)
+    m = 0
+    for k in range(nband):
+        for a in range(first[k], first[k + 1]):
+            for b in range(first[k + 1], first[k + 2]):
+                head[m], tail[m] = a, b
+                m += 1
+    return head, tail
+
+
+@njit(cache=True)
+def _retries(direct: NDArray[np.bool_], head: NDArray[np.int64], tail: NDArray[np.int64],
+             vline: NDArray[np.int64], vlo: FloatArray, vhi: FloatArray, n_overlap: int,
+             n_tries: int) -> tuple[NDArray[np.int64],
+                                    NDArray[np.int64]]:  # pragma: no cover - compiled
+    """The arcs without a direct link, and the tries left for them, try by try (the
+    constant-offset tries only where the two intervals share a lateral range)."""
     rest = np.flatnonzero(~direct)
-    if len(rest):
-        valid = np.ones((len(_TRIES) - 1, len(rest)), dtype=bool)
-        lo_a, hi_a, lo_b, hi_b = vlo[head[rest]], vhi[head[rest]], vlo[tail[rest]], vhi[tail[rest]]
-        valid[:len(_OVERLAP_TRIES)] = np.minimum(hi_a, hi_b) >= np.maximum(lo_a, lo_b)
-        ti, pi = np.nonzero(valid)
-        idx = rest[pi]
-        p, q, clear = _links_kernel(idx, (ti + 1).astype(np.int64), *geo, *edges, float(r))
-        ok = clear & _within_road(corridor, lines, bent, band[idx], p, q, need=clear)
-        # the first free try of each arc (tries come in order within each arc)
-        sel = _first_per_arc(idx, ok, npair)
-        got = idx[sel]
-        found[got] = True
-        link[got, 0], link[got, 1] = p[sel], q[sel]
-    pairs = np.column_stack((head[found], tail[found])).astype(np.int64)
-    mid_a = lines.center[band[found]] + ((vlo[head[found]] + vhi[head[found]]) / 2.0)[:, None] \
-        * lines.normal[band[found]]
-    mid_b = lines.center[band[found] + 1] + ((vlo[tail[found]] + vhi[tail[found]]) / 2.0)[:, None] \
-        * lines.normal[band[found] + 1]
-    seg = mid_b - mid_a
-    return _Arcs(pairs, np.hypot(seg[:, 0], seg[:, 1]), direct[found], link[found])
+    idx = np.empty(len(rest) * (n_tries - 1), dtype=np.int64)
+    tri = np.empty(len(rest) * (n_tries - 1), dtype=np.int64)
+    m = 0
+    for t in range(1, n_tries):
+        for i in rest:
+            a, b = head[i], tail[i]
+            if t > n_overlap or min(vhi[a], vhi[b]) >= max(vlo[a], vlo[b]):
+                idx[m], tri[m] = i, t
+                m += 1
+    return idx[:m], tri[:m]
+
+
+@njit(cache=True)
+def _gather(head: NDArray[np.int64], tail: NDArray[np.int64], direct: NDArray[np.bool_],
+            p0: FloatArray, q0: FloatArray, idx: NDArray[np.int64], ok: NDArray[np.bool_],
+            p: FloatArray, q: FloatArray) -> tuple[NDArray[np.int64], FloatArray,
+                                                   NDArray[np.bool_],
+                                                   FloatArray]:  # pragma: no cover - compiled
+    """The arcs found: direct ones (link ``p0 -> q0``, the midpoints) and those with a
+    free retry (the first in try order); their pairs, lengths between the midpoints,
+    whether direct, and links ``(E, 2, 2)``."""
+    n = len(head)
+    pick = np.full(n, -1, dtype=np.int64)
+    for c in range(len(idx)):
+        if ok[c] and pick[idx[c]] < 0:
+            pick[idx[c]] = c
+    ne = 0
+    for i in range(n):
+        if direct[i] or pick[i] >= 0:
+            ne += 1
+    pairs = np.empty((ne, 2), dtype=np.int64)
+    length = np.empty(ne)
+    is_direct = np.empty(ne, dtype=np.bool_)
+    link = np.empty((ne, 2, 2))
+    e = 0
+    for i in range(n):
+        if not (direct[i] or pick[i] >= 0):
+            continue
+        pairs[e, 0], pairs[e, 1] = head[i], tail[i]
+        length[e] = np.hypot(q0[i, 0] - p0[i, 0], q0[i, 1] - p0[i, 1])
+        is_direct[e] = direct[i]
+        src_p, src_q, j = (p0, q0, i) if direct[i] else (p, q, pick[i])
+        link[e, 0, 0], link[e, 0, 1] = src_p[j, 0], src_p[j, 1]
+        link[e, 1, 0], link[e, 1, 1] = src_q[j, 0], src_q[j, 1]
+        e += 1
+    return pairs, length, is_direct, link
 
 
 #: Every try of :func:`_arcs` as (kind, fraction): 0 the midpoints, 1 constant lateral
@@ -672,42 +725,32 @@ _TRIES = np.array([(0.0, 0.0)] + [(1.0, f) for f in _OVERLAP_TRIES]
 
 
 @njit(cache=True)
-def _first_per_arc(idx: NDArray[np.int64], ok: NDArray[np.bool_],
-                   n: int) -> NDArray[np.int64]:  # pragma: no cover - compiled
-    """Positions of the first ``ok`` candidate of each arc ``idx``, by arc."""
-    first = np.full(n, -1, dtype=np.int64)
-    for c in range(len(idx)):
-        if ok[c] and first[idx[c]] < 0:
-            first[idx[c]] = c
-    return first[first >= 0]
-
-
-@njit(cache=True)
-def _links_kernel(idx: NDArray[np.int64], tri: NDArray[np.int64], cx: FloatArray,
-                  cy: FloatArray, nx: FloatArray, ny: FloatArray, lo_a: FloatArray,
-                  hi_a: FloatArray, lo_b: FloatArray, hi_b: FloatArray,
-                  band: NDArray[np.int64], tries: FloatArray, e_first: NDArray[np.int64],
+def _links_kernel(idx: NDArray[np.int64], tri: NDArray[np.int64], head: NDArray[np.int64],
+                  tail: NDArray[np.int64], vline: NDArray[np.int64], vlo: FloatArray,
+                  vhi: FloatArray, cx: FloatArray, cy: FloatArray, nx: FloatArray,
+                  ny: FloatArray, tries: FloatArray, e_first: NDArray[np.int64],
                   ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray,
                   r: float) -> tuple[FloatArray, FloatArray,
                                      NDArray[np.bool_]]:  # pragma: no cover - compiled
-    """Links ``p -> q`` ``(n, 2)`` of try ``tri`` of arcs ``idx``, and whether each keeps
-    ``r`` from the obstacle edges ``a -> b`` near its band (edges of band k:
-    ``e_first[k]:e_first[k + 1]``); exact segment-to-segment distances."""
+    """Links ``p -> q`` ``(n, 2)`` of try ``tri`` of arcs ``idx`` (vertex ``head`` to
+    vertex ``tail``, free intervals ``vlo..vhi``), and whether each keeps ``r`` from the
+    obstacle edges ``a -> b`` near its band (edges of band k: ``e_first[k]:e_first[k +
+    1]``); exact segment-to-segment distances."""
     n = len(idx)
     p = np.empty((n, 2))
     q = np.empty((n, 2))
     clear = np.ones(n, dtype=np.bool_)
     for c in range(n):
-        i = idx[c]
-        k = band[i]
+        a, b = head[idx[c]], tail[idx[c]]
+        k = vline[a]
         kind, f = tries[tri[c], 0], tries[tri[c], 1]
         if kind == 0.0:
-            la, lb = (lo_a[i] + hi_a[i]) / 2.0, (lo_b[i] + hi_b[i]) / 2.0
+            la, lb = (vlo[a] + vhi[a]) / 2.0, (vlo[b] + vhi[b]) / 2.0
         elif kind == 1.0:
-            c_lo, c_hi = max(lo_a[i], lo_b[i]), min(hi_a[i], hi_b[i])
+            c_lo, c_hi = max(vlo[a], vlo[b]), min(vhi[a], vhi[b])
             la = lb = c_lo + f * (c_hi - c_lo)
         else:
-            la, lb = lo_a[i] + f * (hi_a[i] - lo_a[i]), lo_b[i] + f * (hi_b[i] - lo_b[i])
+            la, lb = vlo[a] + f * (vhi[a] - vlo[a]), vlo[b] + f * (vhi[b] - vlo[b])
         px, py = cx[k] + la * nx[k], cy[k] + la * ny[k]
         qx, qy = cx[k + 1] + lb * nx[k + 1], cy[k + 1] + lb * ny[k + 1]
         p[c, 0], p[c, 1], q[c, 0], q[c, 1] = px, py, qx, qy
