@@ -809,18 +809,37 @@ def _segment_distance(px: float, py: float, qx: float, qy: float, ax: float, ay:
 def _bent_bands(corridor: Corridor, stations: FloatArray) -> NDArray[np.bool_]:
     """Whether the reference line or a boundary offset bends between consecutive
     stations ``(n - 1,)``."""
-    s = corridor.s
-    kink = np.zeros(len(s))
-    if len(s) > 2:
-        h = corridor.heading_at((s[:-1] + s[1:]) / 2.0)
-        ds = np.diff(s)
-        kink[1:-1] = ((np.abs(wrap_angle(np.diff(h))) > 1e-12)
-                      | (np.abs(np.diff(np.diff(corridor.left) / ds)) > 1e-12)
-                      | (np.abs(np.diff(np.diff(corridor.right) / ds)) > 1e-12))
-    ck = np.concatenate(([0.0], np.cumsum(kink)))
-    inner = (ck[np.searchsorted(s, stations[1:], side="left")]
-             - ck[np.searchsorted(s, stations[:-1], side="right")])
-    return np.asarray(inner > 0)
+    s = _f64(corridor.s)
+    if len(s) <= 2:
+        return np.zeros(max(len(stations) - 1, 0), dtype=bool)
+    turn = wrap_angle(np.diff(corridor.heading_at((s[:-1] + s[1:]) / 2.0)))
+    return _bent_kernel(s, _f64(turn), _f64(corridor.left), _f64(corridor.right),
+                        _f64(stations))
+
+
+@njit(cache=True)
+def _bent_kernel(s: FloatArray, turn: FloatArray, left: FloatArray, right: FloatArray,
+                 stations: FloatArray) -> NDArray[np.bool_]:  # pragma: no cover - compiled
+    """:func:`_bent_bands` given the reference's turn ``(n - 2,)`` [rad] at each inner
+    vertex: whether a vertex where the heading or a boundary's slope changes lies
+    strictly between consecutive stations."""
+    n = len(s)
+    count = np.zeros(n + 1, dtype=np.int64)  # kinks among vertices 0 .. i - 1
+    for i in range(n):
+        kink = False
+        if 0 < i < n - 1:
+            d0, d1 = s[i] - s[i - 1], s[i + 1] - s[i]
+            kink = (abs(turn[i - 1]) > 1e-12
+                    or abs((left[i + 1] - left[i]) / d1 - (left[i] - left[i - 1]) / d0) > 1e-12
+                    or abs((right[i + 1] - right[i]) / d1 - (right[i] - right[i - 1]) / d0)
+                    > 1e-12)
+        count[i + 1] = count[i] + (1 if kink else 0)
+    lo = np.searchsorted(s, stations[:-1], side="right")
+    hi = np.searchsorted(s, stations[1:], side="left")
+    out = np.empty(len(stations) - 1, dtype=np.bool_)
+    for b in range(len(out)):
+        out[b] = count[hi[b]] - count[lo[b]] > 0
+    return out
 
 
 def _within_road(

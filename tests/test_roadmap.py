@@ -482,3 +482,29 @@ def test_search_is_widest_then_shortest_by_enumeration() -> None:
         assert path[0] == 0 and vline[path[-1]] == nline - 1
         got = (-min(float(width[path].min()), wmax), float(arc_len[steps].sum()))
         assert got[0] == best[0] and got[1] == pytest.approx(best[1])
+
+
+def test_bent_bands_match_the_array_formula() -> None:
+    from splineplan.geometry import wrap_angle
+    from splineplan.roadmap import _bent_bands
+
+    rng = np.random.default_rng(3)
+    for trial in range(30):
+        n = int(rng.integers(2, 12))
+        ref = np.cumsum(rng.uniform(0.5, 4.0, (n, 2)) * [1.0, rng.choice([0.0, 0.3])], axis=0)
+        left = np.full(n, 3.0) if trial % 2 else rng.uniform(2.0, 4.0, n)
+        corridor = Corridor.from_reference(ref, left, -left)
+        stations = np.sort(rng.uniform(0.0, corridor.length, int(rng.integers(2, 20))))
+        # the formula the compiled loop replaces
+        s = corridor.s
+        kink = np.zeros(len(s))
+        if len(s) > 2:
+            h = corridor.heading_at((s[:-1] + s[1:]) / 2.0)
+            ds = np.diff(s)
+            kink[1:-1] = ((np.abs(wrap_angle(np.diff(h))) > 1e-12)
+                          | (np.abs(np.diff(np.diff(corridor.left) / ds)) > 1e-12)
+                          | (np.abs(np.diff(np.diff(corridor.right) / ds)) > 1e-12))
+        ck = np.concatenate(([0.0], np.cumsum(kink)))
+        want = (ck[np.searchsorted(s, stations[1:], side="left")]
+                - ck[np.searchsorted(s, stations[:-1], side="right")]) > 0
+        np.testing.assert_array_equal(_bent_bands(corridor, stations), want)
