@@ -186,6 +186,8 @@ class RoadNetwork:
     _conn_from: IntArray = field(repr=False)
     _conn_to: IntArray = field(repr=False)
     _graphs: dict[str, ClassGraph] = field(default_factory=dict, repr=False)
+    #: bands of route corridors by the lanes they span (see :func:`route_corridor`)
+    _bands: dict[tuple[str, ...], Any] = field(default_factory=dict, repr=False)
 
     @property
     def n_edges(self) -> int:
@@ -452,7 +454,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         # and its signals and right of way hold, only from those
         into = {c.from_lane for c in conns}
         src = [ln for ln in lanes if ln.index in into] or lanes
-        pieces.append(_band(lanes[0].shape, lanes[0].width, lanes[-1].shape, lanes[-1].width))
+        pieces.append(_edge_band(network, lanes[0], lanes[-1]))
         if i > 0 and (src[0] is not lanes[0] or src[-1] is not lanes[-1]):
             keep.append(_approach_band(src, APPROACH_LENGTH))
             keep_edge.append(i)
@@ -460,7 +462,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
             dst = [ln for ln in network.lanes_of(edges[i + 1]) if ln.allows(cls)]
-            fillet = _junction_band(lanes, dst) if dst else None
+            fillet = _cached_junction_band(network, lanes, dst) if dst else None
             if fillet is not None:
                 pieces.append(fillet)
                 continue
@@ -501,6 +503,34 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
                     keep_left, keep_right, ends_s)
+
+
+def _frozen(band: tuple[FloatArray, FloatArray, FloatArray] | None
+            ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    if band is not None:
+        for a in band:
+            a.setflags(write=False)
+    return band
+
+
+def _edge_band(network: RoadNetwork, right: Lane, left: Lane
+               ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`_band` between two lanes of an edge, once per network (read-only)."""
+    key = ("edge", right.id, left.id)
+    if key not in network._bands:
+        network._bands[key] = _frozen(_band(right.shape, right.width, left.shape, left.width))
+    band: tuple[FloatArray, FloatArray, FloatArray] = network._bands[key]
+    return band
+
+
+def _cached_junction_band(network: RoadNetwork, incoming: list[Lane], outgoing: list[Lane]
+                          ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """:func:`_junction_band`, once per network and lanes (read-only)."""
+    key = ("junction", incoming[0].id, incoming[-1].id, outgoing[0].id, outgoing[-1].id)
+    if key not in network._bands:
+        network._bands[key] = _frozen(_junction_band(incoming, outgoing))
+    band: tuple[FloatArray, FloatArray, FloatArray] | None = network._bands[key]
+    return band
 
 
 #: Narrowest drivable width [m] a route corridor keeps around its reference line, where
