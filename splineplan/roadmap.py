@@ -352,26 +352,26 @@ def _cull(
     Obstacles are sorted along the axis on which the segments spread most; each segment
     tests only the obstacles whose extent on that axis can reach it.
     """
-    lo = np.minimum(seg_a, seg_b) - r
-    hi = np.maximum(seg_a, seg_b) + r
-    if len(lo) == 0 or len(bbox) == 0:
+    if len(seg_a) == 0 or len(bbox) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    ax = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
-    order = np.argsort(bbox[:, ax], kind="stable")
-    bmin = bbox[order, ax]
-    reach = float(np.max(bbox[:, ax + 2] - bbox[:, ax]))
-    first = np.searchsorted(bmin, lo[:, ax] - reach, side="left")
-    last = np.searchsorted(bmin, hi[:, ax], side="right")
-    return _cull_kernel(np.ascontiguousarray(lo), np.ascontiguousarray(hi),
-                        np.ascontiguousarray(bbox, dtype=float), order.astype(np.int64),
-                        first.astype(np.int64), last.astype(np.int64))
+    return _cull_kernel(_f64(seg_a), _f64(seg_b), _f64(bbox), float(r))
 
 
 @njit(cache=True)
-def _cull_kernel(lo: FloatArray, hi: FloatArray, bbox: FloatArray, order: NDArray[np.int64],
-                 first: NDArray[np.int64], last: NDArray[np.int64]
+def _cull_kernel(seg_a: FloatArray, seg_b: FloatArray, bbox: FloatArray, r: float
                  ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover - compiled
-    """The box test of :func:`_cull` on segment ``i``'s candidates ``order[first:last]``."""
+    """:func:`_cull`: each segment's candidates ``order[first:last]`` along the sorting
+    axis, box-tested."""
+    lo = np.minimum(seg_a, seg_b) - r
+    hi = np.maximum(seg_a, seg_b) + r
+    spread0 = hi[:, 0].max() - lo[:, 0].min()
+    spread1 = hi[:, 1].max() - lo[:, 1].min()
+    ax = 1 if spread1 > spread0 else 0
+    order = np.argsort(bbox[:, ax], kind="mergesort")
+    bmin = bbox[order, ax]
+    reach = (bbox[:, ax + 2] - bbox[:, ax]).max()
+    first = np.searchsorted(bmin, lo[:, ax] - reach, side="left")
+    last = np.searchsorted(bmin, hi[:, ax], side="right")
     n = len(lo)
     total = 0
     for i in range(n):

@@ -508,3 +508,21 @@ def test_bent_bands_match_the_array_formula() -> None:
         want = (ck[np.searchsorted(s, stations[1:], side="left")]
                 - ck[np.searchsorted(s, stations[:-1], side="right")]) > 0
         np.testing.assert_array_equal(_bent_bands(corridor, stations), want)
+
+
+def test_cull_finds_every_box_pair_within_reach() -> None:
+    from splineplan.roadmap import _cull
+
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        a = rng.uniform(0.0, 50.0, (int(rng.integers(1, 30)), 2))
+        b = a + rng.normal(0.0, 3.0, a.shape)
+        lo = rng.uniform(0.0, 50.0, (int(rng.integers(1, 30)), 2))
+        bbox = np.hstack((lo, lo + rng.uniform(0.1, 8.0, lo.shape)))
+        r = float(rng.uniform(0.0, 2.0))
+        s_lo, s_hi = np.minimum(a, b) - r, np.maximum(a, b) + r
+        want = [(i, j) for i in range(len(a)) for j in range(len(bbox))
+                if s_lo[i, 0] <= bbox[j, 2] and s_hi[i, 0] >= bbox[j, 0]
+                and s_lo[i, 1] <= bbox[j, 3] and s_hi[i, 1] >= bbox[j, 1]]
+        i, j = _cull(a, b, bbox, r)
+        assert list(zip(i.tolist(), j.tolist(), strict=True)) == want
