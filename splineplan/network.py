@@ -186,6 +186,8 @@ class RoadNetwork:
     _conn_from: IntArray = field(repr=False)
     _conn_to: IntArray = field(repr=False)
     _graphs: dict[str, ClassGraph] = field(default_factory=dict, repr=False)
+    #: bands of route corridors by the lanes they span (see :func:`route_corridor`)
+    _bands: dict[tuple[str, ...], Any] = field(default_factory=dict, repr=False)
 
     @property
     def n_edges(self) -> int:
@@ -452,7 +454,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         # and its signals and right of way hold, only from those
         into = {c.from_lane for c in conns}
         src = [ln for ln in lanes if ln.index in into] or lanes
-        pieces.append(_band(lanes[0].shape, lanes[0].width, lanes[-1].shape, lanes[-1].width))
+        pieces.append(_edge_band(network, lanes[0], lanes[-1]))
         if i > 0 and (src[0] is not lanes[0] or src[-1] is not lanes[-1]):
             keep.append(_approach_band(src, APPROACH_LENGTH))
             keep_edge.append(i)
@@ -460,7 +462,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
             dst = [ln for ln in network.lanes_of(edges[i + 1]) if ln.allows(cls)]
-            fillet = _junction_band(lanes, dst) if dst else None
+            fillet = _cached_junction_band(network, lanes, dst) if dst else None
             if fillet is not None:
                 pieces.append(fillet)
                 continue
@@ -501,6 +503,34 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
                     keep_left, keep_right, ends_s)
+
+
+def _frozen(band: tuple[FloatArray, FloatArray, FloatArray] | None
+            ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    if band is not None:
+        for a in band:
+            a.setflags(write=False)
+    return band
+
+
+def _edge_band(network: RoadNetwork, right: Lane, left: Lane
+               ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """:func:`_band` between two lanes of an edge, once per network (read-only)."""
+    key = ("edge", right.id, left.id)
+    if key not in network._bands:
+        network._bands[key] = _frozen(_band(right.shape, right.width, left.shape, left.width))
+    band: tuple[FloatArray, FloatArray, FloatArray] = network._bands[key]
+    return band
+
+
+def _cached_junction_band(network: RoadNetwork, incoming: list[Lane], outgoing: list[Lane]
+                          ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+    """:func:`_junction_band`, once per network and lanes (read-only)."""
+    key = ("junction", incoming[0].id, incoming[-1].id, outgoing[0].id, outgoing[-1].id)
+    if key not in network._bands:
+        network._bands[key] = _frozen(_junction_band(incoming, outgoing))
+    band: tuple[FloatArray, FloatArray, FloatArray] | None = network._bands[key]
+    return band
 
 
 #: Narrowest drivable width [m] a route corridor keeps around its reference line, where
@@ -590,10 +620,12 @@ def _piece_windows(probe: Corridor, pieces: list[tuple[FloatArray, FloatArray, F
     return [(scale * a - WINDOW_SLACK, scale * b + WINDOW_SLACK) for a, b in spans]
 
 
-def _project(probe: Corridor, points: FloatArray, window: tuple[float, float]) -> FloatArray:
+def _project(probe: Corridor, points: FloatArray, window: tuple[float, float],
+             sl: FloatArray | None = None) -> FloatArray:
     """Stations and offsets ``(n, 2)`` of points on the reference line, onto the part of it
-    within the station ``window`` where the nearest part lies outside."""
-    sl = probe.to_sl(points)
+    within the station ``window`` where the nearest part lies outside (``sl``: the points'
+    projections onto the whole line, if known)."""
+    sl = probe.to_sl(points) if sl is None else sl
     lo, hi = max(window[0], 0.0), min(window[1], probe.length)
     if hi - lo < 1.0 or np.all((sl[:, 0] >= lo) & (sl[:, 0] <= hi)):
         return sl
@@ -628,22 +660,29 @@ def _union_offsets(
     n = len(probe.s)
     left = np.full(n, -np.inf)
     right = np.full(n, np.inf)
-    for (ref0, lo0, ro0), window in zip(pieces, windows, strict=True):
+    dense = []
+    for ref0, lo0, ro0 in pieces:
         s0 = polyline_stations(ref0)  # densely, so that the lateral offsets follow the bends
         u = np.linspace(0.0, s0[-1], max(2, int(np.ceil(s0[-1] / 0.5)) + 1))
         ref = np.column_stack((np.interp(u, s0, ref0[:, 0]), np.interp(u, s0, ref0[:, 1])))
-        lo, ro = np.interp(u, s0, lo0), np.interp(u, s0, ro0)
-        sl = _project(probe, ref, window)
+        dense.append((ref, np.interp(u, s0, lo0), np.interp(u, s0, ro0)))
+    # one projection for all pieces; again within its window where a piece needs it
+    at = np.cumsum([0] + [len(d[0]) for d in dense])
+    sl_all = probe.to_sl(np.concatenate([d[0] for d in dense])) if dense else np.zeros((0, 2))
+    for k, ((ref, lo, ro), window) in enumerate(zip(dense, windows, strict=True)):
+        sl = _project(probe, ref, window, sl_all[at[k]:at[k + 1]])
         s = np.maximum.accumulate(sl[:, 0])
         keep = np.concatenate(([True], np.diff(s) > 1e-6))
         s, lft, rgt = s[keep], (sl[:, 1] + lo)[keep], (sl[:, 1] + ro)[keep]
-        inside = (probe.s >= s[0] - 0.25) & (probe.s <= s[-1] + 0.25)
+        # the stations within 0.25 m of the piece's (probe.s is sorted)
+        i0 = int(np.searchsorted(probe.s, s[0] - 0.25, side="left"))
+        i1 = max(int(np.searchsorted(probe.s, s[-1] + 0.25, side="right")), i0)
         if len(s) == 1:
-            lft_i, rgt_i = np.full(inside.sum(), lft[0]), np.full(inside.sum(), rgt[0])
+            lft_i, rgt_i = np.full(i1 - i0, lft[0]), np.full(i1 - i0, rgt[0])
         else:
-            lft_i, rgt_i = np.interp(probe.s[inside], s, lft), np.interp(probe.s[inside], s, rgt)
-        left[inside] = np.maximum(left[inside], lft_i)
-        right[inside] = np.minimum(right[inside], rgt_i)
+            lft_i, rgt_i = np.interp(probe.s[i0:i1], s, lft), np.interp(probe.s[i0:i1], s, rgt)
+        left[i0:i1] = np.maximum(left[i0:i1], lft_i)
+        right[i0:i1] = np.minimum(right[i0:i1], rgt_i)
     covered = np.isfinite(left)
     if not fill:
         return (np.where(covered, left, UNBOUNDED), np.where(covered, right, -UNBOUNDED))

@@ -12,10 +12,16 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.errors import GeometryError
 from splineplan.geometry import FloatArray, box_corners, distance_to_polygons
+
+#: Distance [m] from the line between its neighbours below which a point of a swept hull
+#: (:meth:`Obstacles.elongated`) counts as on that line and is left out: the corners of
+#: a box shifted along its own axis, which only rounding moves off the hull's sides.
+HULL_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True, eq=False)
@@ -187,23 +193,22 @@ class Obstacles:
 
         The Minkowski sum with a segment of length ``2 extra`` centred on the origin: the
         convex hull of the polygon shifted both ways (exact for convex polygons, larger
-        for others). Level 2 uses it to leave room for the corners of a rectangular
-        vehicle that it models as a disc.
+        for others), counter-clockwise. Level 2 uses it to leave
+        room for the corners of a rectangular vehicle that it models as a disc.
         """
-        from scipy.spatial import ConvexHull
-
         head = np.broadcast_to(np.asarray(directions, dtype=float), (len(self),))
         if not (np.isfinite(extra) and extra >= 0):
             raise GeometryError(f"elongation must be >= 0, got {extra!r}")
         if extra == 0 or len(self) == 0:
             return self
-        rings = []
-        for i in range(len(self)):
-            shift = extra * np.array([np.cos(head[i]), np.sin(head[i])])
-            p = self.polygon(i)
-            pts = np.concatenate((p + shift, p - shift))
-            rings.append(pts[ConvexHull(pts).vertices])
-        return Obstacles.from_polygons(rings, self.ids)
+        if not np.all(np.isfinite(head)):
+            raise GeometryError("elongation directions must be finite")
+        vert, offsets = _swept_hulls(
+            np.ascontiguousarray(self.vertices[:, 0], dtype=float),
+            np.ascontiguousarray(self.vertices[:, 1], dtype=float),
+            np.asarray(self.offsets, dtype=np.int64), extra * np.cos(head),
+            extra * np.sin(head))
+        return Obstacles(vert, offsets, self.ids)
 
     def distance(self, xy: ArrayLike) -> FloatArray:
         """Distance [m] from each point ``(n, 2)`` to the nearest obstacle, 0 inside."""
@@ -211,3 +216,65 @@ class Obstacles:
         if len(self) == 0:
             return np.full(len(pts), np.inf)
         return np.asarray(distance_to_polygons(pts, self.vertices, self.offsets).min(axis=1))
+
+
+@njit(cache=True)
+def _swept_hulls(vx: FloatArray, vy: FloatArray, offsets: NDArray[np.int64], sx: FloatArray,
+                 sy: FloatArray) -> tuple[FloatArray,
+                                          NDArray[np.int64]]:  # pragma: no cover - compiled
+    """Convex hull of each polygon's vertices shifted by ``+-(sx, sy)`` [m]: vertices
+    ``(m, 2)`` counter-clockwise, and offsets ``(k + 1,)`` (monotone chain; then the
+    vertices within :data:`HULL_TOLERANCE` of the chord between their neighbours are
+    left out, as Qhull merges them)."""
+    k = len(offsets) - 1
+    out = np.empty((2 * len(vx), 2))
+    out_off = np.zeros(k + 1, dtype=np.int64)
+    m = 0
+    for i in range(k):
+        a, b = offsets[i], offsets[i + 1]
+        n = 2 * (b - a)
+        px = np.empty(n)
+        py = np.empty(n)
+        for j in range(b - a):
+            px[2 * j], py[2 * j] = vx[a + j] + sx[i], vy[a + j] + sy[i]
+            px[2 * j + 1], py[2 * j + 1] = vx[a + j] - sx[i], vy[a + j] - sy[i]
+        for j in range(1, n):  # insertion sort by (x, y)
+            x, y = px[j], py[j]
+            t = j
+            while t > 0 and (px[t - 1] > x or (px[t - 1] == x and py[t - 1] > y)):
+                px[t], py[t] = px[t - 1], py[t - 1]
+                t -= 1
+            px[t], py[t] = x, y
+        hx = np.empty(2 * n)
+        hy = np.empty(2 * n)
+        h = 0
+        for sweep in range(2):  # the lower chain left to right, then the upper back
+            base = h
+            for jj in range(n):
+                j = jj if sweep == 0 else n - 1 - jj
+                while h >= base + 2 and ((hx[h - 1] - hx[h - 2]) * (py[j] - hy[h - 2])
+                                         - (hy[h - 1] - hy[h - 2]) * (px[j] - hx[h - 2])) <= 0:
+                    h -= 1
+                hx[h], hy[h] = px[j], py[j]
+                h += 1
+            h -= 1  # each chain's last point starts the other
+        # points that only rounding lifts off a side (a box shifted along its own axis)
+        j = 0
+        while j < h and h > 3:
+            a, c = (j - 1) % h, (j + 1) % h
+            ax, ay, dx, dy = hx[a], hy[a], hx[c] - hx[a], hy[c] - hy[a]
+            turn = (hx[j] - ax) * dy - (hy[j] - ay) * dx
+            along = (hx[j] - ax) * dx + (hy[j] - ay) * dy
+            if (abs(turn) > HULL_TOLERANCE * np.hypot(dx, dy) or along <= 0
+                    or along >= dx * dx + dy * dy):
+                j += 1
+                continue
+            for t in range(j, h - 1):
+                hx[t], hy[t] = hx[t + 1], hy[t + 1]
+            h -= 1
+            j = 0
+        for j in range(h):
+            out[m, 0], out[m, 1] = hx[j], hy[j]
+            m += 1
+        out_off[i + 1] = m
+    return out[:m].copy(), out_off

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import REFERENCE_SPACING, Corridor
@@ -283,6 +284,11 @@ class _Lines:
     inflation: float
 
 
+def _f64(a: ArrayLike) -> FloatArray:
+    """A contiguous float64 array (the one array type the compiled loops take)."""
+    return np.ascontiguousarray(a, dtype=float)
+
+
 def _check_start(corridor: Corridor, s0: float, l0: float) -> None:
     tol = 1e-6
     if s0 < -tol or s0 > corridor.length + tol:
@@ -340,31 +346,54 @@ def _sweep_lines(corridor: Corridor, stations: FloatArray, r: float, *,
 def _cull(
     seg_a: FloatArray, seg_b: FloatArray, bbox: FloatArray, r: float
 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Pairs (segment, obstacle) whose bounding boxes come within ``r`` of each other.
+    """Pairs (segment, obstacle) whose bounding boxes come within ``r`` of each other,
+    sorted by segment, then obstacle.
 
     Obstacles are sorted along the axis on which the segments spread most; each segment
     tests only the obstacles whose extent on that axis can reach it.
     """
+    if len(seg_a) == 0 or len(bbox) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return _cull_kernel(_f64(seg_a), _f64(seg_b), _f64(bbox), float(r))
+
+
+@njit(cache=True)
+def _cull_kernel(seg_a: FloatArray, seg_b: FloatArray, bbox: FloatArray, r: float
+                 ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover - compiled
+    """:func:`_cull`: each segment's candidates ``order[first:last]`` along the sorting
+    axis, box-tested."""
     lo = np.minimum(seg_a, seg_b) - r
     hi = np.maximum(seg_a, seg_b) + r
-    if len(lo) == 0 or len(bbox) == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    ax = int(np.argmax(hi.max(axis=0) - lo.min(axis=0)))
-    order = np.argsort(bbox[:, ax], kind="stable")
+    spread0 = hi[:, 0].max() - lo[:, 0].min()
+    spread1 = hi[:, 1].max() - lo[:, 1].min()
+    ax = 1 if spread1 > spread0 else 0
+    order = np.argsort(bbox[:, ax], kind="mergesort")
     bmin = bbox[order, ax]
-    reach = float(np.max(bbox[:, ax + 2] - bbox[:, ax]))
+    reach = (bbox[:, ax + 2] - bbox[:, ax]).max()
     first = np.searchsorted(bmin, lo[:, ax] - reach, side="left")
     last = np.searchsorted(bmin, hi[:, ax], side="right")
-    count = np.maximum(last - first, 0)
-    i = np.repeat(np.arange(len(lo)), count)
-    j = order[np.repeat(first, count) + np.arange(len(i))
-              - np.repeat(np.cumsum(count) - count, count)]
-    b = bbox[j]
-    hit = ((lo[i, 0] <= b[:, 2]) & (hi[i, 0] >= b[:, 0])
-           & (lo[i, 1] <= b[:, 3]) & (hi[i, 1] >= b[:, 1]))
-    i, j = i[hit], j[hit]
-    srt = np.lexsort((j, i))
-    return i[srt].astype(np.int64), j[srt].astype(np.int64)
+    n = len(lo)
+    total = 0
+    for i in range(n):
+        total += max(last[i] - first[i], 0)
+    out_i = np.empty(total, dtype=np.int64)
+    out_j = np.empty(total, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        start = m
+        for c in range(first[i], last[i]):
+            j = order[c]
+            if (lo[i, 0] <= bbox[j, 2] and hi[i, 0] >= bbox[j, 0]
+                    and lo[i, 1] <= bbox[j, 3] and hi[i, 1] >= bbox[j, 1]):
+                # insertion keeps the segment's obstacles sorted
+                k = m
+                while k > start and out_j[k - 1] > j:
+                    out_j[k] = out_j[k - 1]
+                    k -= 1
+                out_j[k] = j
+                out_i[m] = i
+                m += 1
+    return out_i[:m], out_j[:m]
 
 
 def _expand_edges(
@@ -378,46 +407,6 @@ def _expand_edges(
     return group[rep], edge
 
 
-def _slab(a: FloatArray, b: FloatArray, lo: FloatArray | float,
-          hi: FloatArray | float) -> tuple[FloatArray, FloatArray]:
-    """Solutions v of ``lo <= a + b v <= hi`` as intervals (empty: lower > upper)."""
-    flat = np.abs(b) < 1e-12
-    bb = np.where(flat, 1.0, b)
-    x1, x2 = (lo - a) / bb, (hi - a) / bb
-    inside = (a >= lo) & (a <= hi)
-    low = np.where(flat, np.where(inside, -np.inf, np.inf), np.minimum(x1, x2))
-    high = np.where(flat, np.where(inside, np.inf, -np.inf), np.maximum(x1, x2))
-    return low, high
-
-
-def _capsule_on_line(
-    ua: FloatArray, va: FloatArray, ub: FloatArray, vb: FloatArray, r: float
-) -> tuple[FloatArray, FloatArray]:
-    """Where the line ``u = 0`` comes within ``r`` of segments ``(ua, va) -> (ub, vb)``.
-
-    Returns ``v`` bounds of one closed interval per segment (lower > upper: no contact).
-    The capsule is convex, so its trace is the hull of the traces of its three parts.
-    """
-    lo = np.full(len(ua), np.inf)
-    hi = np.full(len(ua), -np.inf)
-    for u, v in ((ua, va), (ub, vb)):
-        h2 = r * r - u * u
-        ok = h2 >= 0
-        h = np.sqrt(np.where(ok, h2, 0.0))
-        lo = np.where(ok, np.minimum(lo, v - h), lo)
-        hi = np.where(ok, np.maximum(hi, v + h), hi)
-    du, dv = ub - ua, vb - va
-    ln = np.hypot(du, dv)
-    good = ln > 0
-    lns = np.where(good, ln, 1.0)
-    eu, ev = du / lns, dv / lns
-    l1, h1 = _slab(ua * ev - eu * va, eu, -r, r)  # distance across the segment
-    l2, h2 = _slab(-ua * eu - ev * va, ev, 0.0, ln)  # projection onto the segment
-    sl, sh = np.maximum(l1, l2), np.minimum(h1, h2)
-    ok = good & (sl <= sh)
-    return np.where(ok, np.minimum(lo, sl), lo), np.where(ok, np.maximum(hi, sh), hi)
-
-
 def _free_intervals(
     lines: _Lines, obstacles: Obstacles, r: float
 ) -> tuple[NDArray[np.int64], FloatArray, FloatArray]:
@@ -427,68 +416,160 @@ def _free_intervals(
     boundary (the union of its edges' capsules) and the points inside it.
     """
     open_line = lines.hi >= lines.lo
-    b_line = np.zeros(0, dtype=np.int64)
-    b_lo = b_hi = np.zeros(0)
+    li = ob = np.zeros(0, dtype=np.int64)
     if len(obstacles):
         a_xy = lines.center + np.minimum(lines.lo, lines.hi)[:, None] * lines.normal
         b_xy = lines.center + lines.hi[:, None] * lines.normal
         li, ob = _cull(a_xy, b_xy, obstacles.bbox, r)
         keep = open_line[li]
         li, ob = li[keep], ob[keep]
-        pl, edge = _expand_edges(li, ob, obstacles.offsets)
-        start, end, owner = polygon_edges(obstacles.vertices, obstacles.offsets)
-        c, t, n = lines.center[pl], lines.tangent[pl], lines.normal[pl]
-        wa, wb = start[edge] - c, end[edge] - c
-        ua = wa[:, 0] * t[:, 0] + wa[:, 1] * t[:, 1]
-        va = wa[:, 0] * n[:, 0] + wa[:, 1] * n[:, 1]
-        ub = wb[:, 0] * t[:, 0] + wb[:, 1] * t[:, 1]
-        vb = wb[:, 0] * n[:, 0] + wb[:, 1] * n[:, 1]
-        cap_lo, cap_hi = _capsule_on_line(ua, va, ub, vb, r)
-        # interior: pair up the boundary crossings of each (line, polygon) along the line
-        cross = (ua > 0) != (ub > 0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            vc = va + (0.0 - ua) * (vb - va) / (ub - ua)
-        cl, co, cv = pl[cross], owner[edge][cross], vc[cross]
-        order = np.lexsort((cv, co, cl))
-        cl, cv = cl[order], cv[order]
-        even = np.arange(0, len(cv), 2)
-        b_line = np.concatenate((pl, cl[even]))
-        b_lo = np.concatenate((cap_lo, cv[even]))
-        b_hi = np.concatenate((cap_hi, cv[even + 1]))
-    lo_k, hi_k = lines.lo[b_line], lines.hi[b_line]
-    # blocked sets are open intervals; only those that cut into [lo, hi] matter
-    keep = (b_hi > b_lo) & (b_hi > lo_k) & (b_lo < hi_k)
-    b_line, b_lo, b_hi = b_line[keep], b_lo[keep], b_hi[keep]
-    lo_k, hi_k = lo_k[keep], hi_k[keep]
     span = float(np.max(lines.hi - lines.lo, initial=0.0)) + 4.0
-    rel_lo = np.clip(b_lo - lo_k, -1.0, None)
-    rel_hi = np.clip(b_hi - lo_k, None, hi_k - lo_k + 1.0)
-    order = np.lexsort((rel_lo, b_line))
-    b_line, rel_lo, rel_hi = b_line[order], rel_lo[order], rel_hi[order]
-    base = b_line * span
-    run = np.maximum.accumulate(rel_hi + base) if len(base) else base.astype(float)
-    prev = np.concatenate(([-np.inf], run[:-1]))
-    prev_end = np.maximum(prev - base, 0.0)  # free from here (relative to lo) ...
-    gap = rel_lo - prev_end  # ... up to the next blocked interval's start
-    g = gap >= 0
-    f_line = [b_line[g]]
-    f_lo = [prev_end[g] + lines.lo[b_line[g]]]
-    f_hi = [rel_lo[g] + lines.lo[b_line[g]]]
-    # the stretch after each line's last blocked interval, and lines without any
-    last = np.ones(len(b_line), dtype=bool)
-    last[:-1] = b_line[1:] != b_line[:-1]
-    tail_line = b_line[last]
-    tail_lo = np.maximum(run[last] - base[last], 0.0) + lines.lo[tail_line]
-    tail_hi = lines.hi[tail_line]
-    none = np.setdiff1d(np.flatnonzero(open_line), tail_line)
-    f_line += [tail_line, none]
-    f_lo += [tail_lo, lines.lo[none]]
-    f_hi += [tail_hi, lines.hi[none]]
-    fl, flo, fhi = np.concatenate(f_line), np.concatenate(f_lo), np.concatenate(f_hi)
-    ok = fhi >= flo
-    fl, flo, fhi = fl[ok], flo[ok], fhi[ok]
-    order = np.lexsort((flo, fl))
-    return fl[order].astype(np.int64), flo[order], fhi[order]
+    c, t, n = lines.center, lines.tangent, lines.normal
+    vert = obstacles.vertices
+    return _free_kernel(
+        li, ob, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
+        np.ascontiguousarray(t[:, 0]), np.ascontiguousarray(t[:, 1]),
+        np.ascontiguousarray(n[:, 0]), np.ascontiguousarray(n[:, 1]),
+        _f64(lines.lo), _f64(lines.hi), _f64(vert[:, 0]), _f64(vert[:, 1]),
+        np.asarray(obstacles.offsets, dtype=np.int64), float(r), span)
+
+
+@njit(cache=True)
+def _slab(a: float, b: float, lo: float,
+          hi: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Solutions v of ``lo <= a + b v <= hi`` as an interval (empty: lower > upper)."""
+    if abs(b) < 1e-12:
+        if a >= lo and a <= hi:
+            return -np.inf, np.inf
+        return np.inf, -np.inf
+    x1, x2 = (lo - a) / b, (hi - a) / b
+    return min(x1, x2), max(x1, x2)
+
+
+@njit(cache=True)
+def _capsule_on_line(ua: float, va: float, ub: float, vb: float,
+                     r: float) -> tuple[float, float]:  # pragma: no cover - compiled
+    """Where the line ``u = 0`` comes within ``r`` of the segment ``(ua, va) -> (ub, vb)``.
+
+    Returns the ``v`` bounds of a closed interval (lower > upper: no contact). The capsule
+    is convex, so its trace is the hull of the traces of its three parts.
+    """
+    lo = np.inf
+    hi = -np.inf
+    h2 = r * r - ua * ua
+    if h2 >= 0:
+        h = np.sqrt(h2)
+        lo = min(lo, va - h)
+        hi = max(hi, va + h)
+    h2 = r * r - ub * ub
+    if h2 >= 0:
+        h = np.sqrt(h2)
+        lo = min(lo, vb - h)
+        hi = max(hi, vb + h)
+    du, dv = ub - ua, vb - va
+    ln = np.hypot(du, dv)
+    if ln > 0:
+        eu, ev = du / ln, dv / ln
+        l1, h1 = _slab(ua * ev - eu * va, eu, -r, r)  # distance across the segment
+        l2, h2 = _slab(-ua * eu - ev * va, ev, 0.0, ln)  # projection onto the segment
+        sl, sh = max(l1, l2), min(h1, h2)
+        if sl <= sh:
+            lo = min(lo, sl)
+            hi = max(hi, sh)
+    return lo, hi
+
+
+@njit(cache=True)
+def _free_kernel(li: NDArray[np.int64], ob: NDArray[np.int64], cx: FloatArray, cy: FloatArray,
+                 tx: FloatArray, ty: FloatArray, nx: FloatArray, ny: FloatArray,
+                 lo: FloatArray, hi: FloatArray, vx: FloatArray, vy: FloatArray,
+                 offsets: NDArray[np.int64], r: float, span: float
+                 ) -> tuple[NDArray[np.int64], FloatArray,
+                            FloatArray]:  # pragma: no cover - compiled
+    """Free intervals of the lines given the (line, obstacle) pairs ``li``, ``ob`` (sorted
+    by line, then obstacle) that can block them; see :func:`_free_intervals`.
+
+    Per line, blocked are the edges' capsules (in pair and edge order) and, between
+    pairs of the polygon's boundary crossings sorted along the line, its interior; they
+    are sorted by their start (stable) and merged, and the gaps between them are free.
+    """
+    nline = len(lo)
+    npair = len(li)
+    nedge = 0
+    for p in range(npair):
+        nedge += offsets[ob[p] + 1] - offsets[ob[p]]
+    cap = nline + 2 * nedge + 1
+    f_line = np.empty(cap, dtype=np.int64)
+    f_lo = np.empty(cap)
+    f_hi = np.empty(cap)
+    nf = 0
+    b_lo = np.empty(2 * nedge + 1)
+    b_hi = np.empty(2 * nedge + 1)
+    rel_lo = np.empty(2 * nedge + 1)
+    rel_hi = np.empty(2 * nedge + 1)
+    cross = np.empty(nedge + 1)
+    run = -np.inf
+    p = 0
+    for k in range(nline):
+        p0 = p
+        while p < npair and li[p] == k:
+            p += 1
+        if hi[k] < lo[k]:
+            continue
+        lo_k, hi_k = lo[k], hi[k]
+        nb = 0
+        for q in range(p0, p):  # the capsules
+            for e in range(offsets[ob[q]], offsets[ob[q] + 1]):
+                e1 = e + 1 if e + 1 < offsets[ob[q] + 1] else offsets[ob[q]]
+                wax, way = vx[e] - cx[k], vy[e] - cy[k]
+                wbx, wby = vx[e1] - cx[k], vy[e1] - cy[k]
+                ua = wax * tx[k] + way * ty[k]
+                va = wax * nx[k] + way * ny[k]
+                ub = wbx * tx[k] + wby * ty[k]
+                vb = wbx * nx[k] + wby * ny[k]
+                b_lo[nb], b_hi[nb] = _capsule_on_line(ua, va, ub, vb, r)
+                nb += 1
+        for q in range(p0, p):  # the interiors
+            nc = 0
+            for e in range(offsets[ob[q]], offsets[ob[q] + 1]):
+                e1 = e + 1 if e + 1 < offsets[ob[q] + 1] else offsets[ob[q]]
+                wax, way = vx[e] - cx[k], vy[e] - cy[k]
+                wbx, wby = vx[e1] - cx[k], vy[e1] - cy[k]
+                ua = wax * tx[k] + way * ty[k]
+                ub = wbx * tx[k] + wby * ty[k]
+                if (ua > 0) != (ub > 0):
+                    va = wax * nx[k] + way * ny[k]
+                    vb = wbx * nx[k] + wby * ny[k]
+                    cross[nc] = va + (0.0 - ua) * (vb - va) / (ub - ua)
+                    nc += 1
+            cv = np.sort(cross[:nc])
+            for c in range(0, nc - 1, 2):
+                b_lo[nb], b_hi[nb] = cv[c], cv[c + 1]
+                nb += 1
+        # blocked sets are open intervals; only those that cut into [lo, hi] matter
+        m = 0
+        for i in range(nb):
+            if b_hi[i] > b_lo[i] and b_hi[i] > lo_k and b_lo[i] < hi_k:
+                rel_lo[m] = max(b_lo[i] - lo_k, -1.0)
+                rel_hi[m] = min(b_hi[i] - lo_k, hi_k - lo_k + 1.0)
+                m += 1
+        if m == 0:
+            f_line[nf], f_lo[nf], f_hi[nf] = k, lo_k, hi_k
+            nf += 1
+            continue
+        order = np.argsort(rel_lo[:m], kind="mergesort")
+        base = k * span
+        for i in order:
+            prev_end = max(run - base, 0.0)  # free from here (relative to lo) ...
+            if rel_lo[i] - prev_end >= 0 and rel_lo[i] + lo_k >= prev_end + lo_k:
+                f_line[nf], f_lo[nf], f_hi[nf] = k, prev_end + lo_k, rel_lo[i] + lo_k
+                nf += 1  # ... up to the next blocked interval's start
+            run = max(run, rel_hi[i] + base)
+        tail = max(run - base, 0.0) + lo_k  # after the line's last blocked interval
+        if hi_k >= tail:
+            f_line[nf], f_lo[nf], f_hi[nf] = k, tail, hi_k
+            nf += 1
+    return f_line[:nf].copy(), f_lo[:nf].copy(), f_hi[:nf].copy()
 
 
 def _ragged_pairs(
@@ -539,56 +620,148 @@ def _arcs(
     """
     nline = len(lines.lo)
     nband = max(nline - 1, 0)
-    in_tail = vline < nline - 1
-    ia, ib = _ragged_pairs(vline[in_tail], vline[vline > 0] - 1, nband)
-    head = np.flatnonzero(in_tail)[ia]
-    tail = np.flatnonzero(vline > 0)[ib]
-    band = vline[head]
-    culled = _band_edges(lines, obstacles, r, nband)
-
-    def point(line: NDArray[np.int64], lat: FloatArray) -> FloatArray:
-        return np.asarray(lines.center[line] + lat[:, None] * lines.normal[line])
-
-    lo_a, hi_a, lo_b, hi_b = vlo[head], vhi[head], vlo[tail], vhi[tail]
-    found = np.zeros(len(head), dtype=bool)
-    link = np.zeros((len(head), 2, 2))
-    tries: list[tuple[FloatArray, FloatArray, NDArray[np.bool_]]] = [
-        ((lo_a + hi_a) / 2.0, (lo_b + hi_b) / 2.0, np.ones(len(head), dtype=bool))]
-    c_lo, c_hi = np.maximum(lo_a, lo_b), np.minimum(hi_a, hi_b)
-    common = c_hi >= c_lo
-    for f in _OVERLAP_TRIES:
-        lat = c_lo + f * (c_hi - c_lo)
-        tries.append((lat, lat, common))
-    for f in _PROPORTIONAL_TRIES:
-        tries.append((lo_a + f * (hi_a - lo_a), lo_b + f * (hi_b - lo_b),
-                      np.ones(len(head), dtype=bool)))
+    vline = np.ascontiguousarray(vline, dtype=np.int64)
+    head, tail = _arc_pairs(vline, nband)
+    be, edge = _band_edges(lines, obstacles, r, nband)
+    start, end, _ = polygon_edges(obstacles.vertices, obstacles.offsets)
+    geo = (head, tail, vline, _f64(vlo), _f64(vhi), _f64(lines.center[:, 0]),
+           _f64(lines.center[:, 1]), _f64(lines.normal[:, 0]), _f64(lines.normal[:, 1]),
+           _TRIES, np.searchsorted(be, np.arange(nband + 1)).astype(np.int64),
+           _f64(start[edge, 0]), _f64(start[edge, 1]), _f64(end[edge, 0]),
+           _f64(end[edge, 1]), float(r))
     bent = _bent_bands(corridor, lines.station)
     # first the midpoints, then every other try at once for the arcs still missing
-    la, lb, _ = tries[0]
-    p, q = point(band, la), point(band + 1, lb)
-    direct = _links_free(corridor, lines, culled, bent, obstacles, band, p, q, r)
-    found[:] = direct
-    link[direct, 0], link[direct, 1] = p[direct], q[direct]
+    band = vline[head]
+    idx0 = np.arange(len(head), dtype=np.int64)
+    p0, q0, clear = _links_kernel(idx0, np.zeros(len(head), dtype=np.int64), *geo)
+    direct = clear & _within_road(corridor, lines, bent, band, p0, q0, need=clear)
+    idx, tri = _retries(direct, *geo[:5], len(_OVERLAP_TRIES), len(_TRIES))
+    p, q, clear = _links_kernel(idx, tri, *geo)
+    ok = clear & _within_road(corridor, lines, bent, band[idx], p, q, need=clear)
+    pairs, length, direct, link = _gather(head, tail, direct, p0, q0, idx, ok, p, q)
+    return _Arcs(pairs, length, direct, link)
+
+
+@njit(cache=True)
+def _arc_pairs(vline: NDArray[np.int64], nband: int) -> tuple[
+        NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover - compiled
+    """Every pair (head, tail) of vertices on lines k and k + 1 ``k < nband`` (vertices
+    sorted by line), by band, then head, then tail."""
+    first = np.searchsorted(vline, np.arange(nband + 2))
+    n = 0
+    for k in range(nband):
+        n += (first[k + 1] - first[k]) * (first[k + 2] - first[k + 1])
+    head = np.empty(n, dtype=np.int64)
+    tail = np.empty(n, dtype=np.int64)
+    m = 0
+    for k in range(nband):
+        for a in range(first[k], first[k + 1]):
+            for b in range(first[k + 1], first[k + 2]):
+                head[m], tail[m] = a, b
+                m += 1
+    return head, tail
+
+
+@njit(cache=True)
+def _retries(direct: NDArray[np.bool_], head: NDArray[np.int64], tail: NDArray[np.int64],
+             vline: NDArray[np.int64], vlo: FloatArray, vhi: FloatArray, n_overlap: int,
+             n_tries: int) -> tuple[NDArray[np.int64],
+                                    NDArray[np.int64]]:  # pragma: no cover - compiled
+    """The arcs without a direct link, and the tries left for them, try by try (the
+    constant-offset tries only where the two intervals share a lateral range)."""
     rest = np.flatnonzero(~direct)
-    if len(rest):
-        la = np.stack([t[0][rest] for t in tries[1:]])  # (tries, pairs)
-        lb = np.stack([t[1][rest] for t in tries[1:]])
-        valid = np.stack([t[2][rest] for t in tries[1:]])
-        ti, pi = np.nonzero(valid)
-        idx = rest[pi]
-        p, q = point(band[idx], la[ti, pi]), point(band[idx] + 1, lb[ti, pi])
-        ok = _links_free(corridor, lines, culled, bent, obstacles, band[idx], p, q, r)
-        # the first free try of each arc (tries are in order within each arc)
-        order = np.lexsort((ti[ok], idx[ok]))
-        got, first = np.unique(idx[ok][order], return_index=True)
-        sel = np.flatnonzero(ok)[order][first]
-        found[got] = True
-        link[got, 0], link[got, 1] = p[sel], q[sel]
-    pairs = np.column_stack((head[found], tail[found])).astype(np.int64)
-    mid_a = point(band[found], (lo_a[found] + hi_a[found]) / 2.0)
-    mid_b = point(band[found] + 1, (lo_b[found] + hi_b[found]) / 2.0)
-    seg = mid_b - mid_a
-    return _Arcs(pairs, np.hypot(seg[:, 0], seg[:, 1]), direct[found], link[found])
+    idx = np.empty(len(rest) * (n_tries - 1), dtype=np.int64)
+    tri = np.empty(len(rest) * (n_tries - 1), dtype=np.int64)
+    m = 0
+    for t in range(1, n_tries):
+        for i in rest:
+            a, b = head[i], tail[i]
+            if t > n_overlap or min(vhi[a], vhi[b]) >= max(vlo[a], vlo[b]):
+                idx[m], tri[m] = i, t
+                m += 1
+    return idx[:m], tri[:m]
+
+
+@njit(cache=True)
+def _gather(head: NDArray[np.int64], tail: NDArray[np.int64], direct: NDArray[np.bool_],
+            p0: FloatArray, q0: FloatArray, idx: NDArray[np.int64], ok: NDArray[np.bool_],
+            p: FloatArray, q: FloatArray) -> tuple[NDArray[np.int64], FloatArray,
+                                                   NDArray[np.bool_],
+                                                   FloatArray]:  # pragma: no cover - compiled
+    """The arcs found: direct ones (link ``p0 -> q0``, the midpoints) and those with a
+    free retry (the first in try order); their pairs, lengths between the midpoints,
+    whether direct, and links ``(E, 2, 2)``."""
+    n = len(head)
+    pick = np.full(n, -1, dtype=np.int64)
+    for c in range(len(idx)):
+        if ok[c] and pick[idx[c]] < 0:
+            pick[idx[c]] = c
+    ne = 0
+    for i in range(n):
+        if direct[i] or pick[i] >= 0:
+            ne += 1
+    pairs = np.empty((ne, 2), dtype=np.int64)
+    length = np.empty(ne)
+    is_direct = np.empty(ne, dtype=np.bool_)
+    link = np.empty((ne, 2, 2))
+    e = 0
+    for i in range(n):
+        if not (direct[i] or pick[i] >= 0):
+            continue
+        pairs[e, 0], pairs[e, 1] = head[i], tail[i]
+        length[e] = np.hypot(q0[i, 0] - p0[i, 0], q0[i, 1] - p0[i, 1])
+        is_direct[e] = direct[i]
+        src_p, src_q, j = (p0, q0, i) if direct[i] else (p, q, pick[i])
+        link[e, 0, 0], link[e, 0, 1] = src_p[j, 0], src_p[j, 1]
+        link[e, 1, 0], link[e, 1, 1] = src_q[j, 0], src_q[j, 1]
+        e += 1
+    return pairs, length, is_direct, link
+
+
+#: Every try of :func:`_arcs` as (kind, fraction): 0 the midpoints, 1 constant lateral
+#: offset across the common range, 2 the same fraction of both intervals.
+_TRIES = np.array([(0.0, 0.0)] + [(1.0, f) for f in _OVERLAP_TRIES]
+                  + [(2.0, f) for f in _PROPORTIONAL_TRIES])
+
+
+@njit(cache=True)
+def _links_kernel(idx: NDArray[np.int64], tri: NDArray[np.int64], head: NDArray[np.int64],
+                  tail: NDArray[np.int64], vline: NDArray[np.int64], vlo: FloatArray,
+                  vhi: FloatArray, cx: FloatArray, cy: FloatArray, nx: FloatArray,
+                  ny: FloatArray, tries: FloatArray, e_first: NDArray[np.int64],
+                  ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray,
+                  r: float) -> tuple[FloatArray, FloatArray,
+                                     NDArray[np.bool_]]:  # pragma: no cover - compiled
+    """Links ``p -> q`` ``(n, 2)`` of try ``tri`` of arcs ``idx`` (vertex ``head`` to
+    vertex ``tail``, free intervals ``vlo..vhi``), and whether each keeps ``r`` from the
+    obstacle edges ``a -> b`` near its band (edges of band k: ``e_first[k]:e_first[k +
+    1]``); exact segment-to-segment distances."""
+    n = len(idx)
+    p = np.empty((n, 2))
+    q = np.empty((n, 2))
+    clear = np.ones(n, dtype=np.bool_)
+    for c in range(n):
+        a, b = head[idx[c]], tail[idx[c]]
+        k = vline[a]
+        kind, f = tries[tri[c], 0], tries[tri[c], 1]
+        if kind == 0.0:
+            la, lb = (vlo[a] + vhi[a]) / 2.0, (vlo[b] + vhi[b]) / 2.0
+        elif kind == 1.0:
+            c_lo, c_hi = max(vlo[a], vlo[b]), min(vhi[a], vhi[b])
+            la = lb = c_lo + f * (c_hi - c_lo)
+        else:
+            la, lb = vlo[a] + f * (vhi[a] - vlo[a]), vlo[b] + f * (vhi[b] - vlo[b])
+        px, py = cx[k] + la * nx[k], cy[k] + la * ny[k]
+        qx, qy = cx[k + 1] + lb * nx[k + 1], cy[k + 1] + lb * ny[k + 1]
+        p[c, 0], p[c, 1], q[c, 0], q[c, 1] = px, py, qx, qy
+        for e in range(e_first[k], e_first[k + 1]):
+            near = (min(px, qx) - r <= max(ax[e], bx[e]) and max(px, qx) + r >= min(ax[e], bx[e])
+                    and min(py, qy) - r <= max(ay[e], by[e])
+                    and max(py, qy) + r >= min(ay[e], by[e]))
+            if near and _segment_distance(px, py, qx, qy, ax[e], ay[e], bx[e], by[e]) < r - _EPS:
+                clear[c] = False
+                break
+    return p, q, clear
 
 
 def _band_edges(
@@ -608,93 +781,88 @@ def _band_edges(
     return be[order], edge[order]
 
 
-def _links_free(
-    corridor: Corridor, lines: _Lines, culled: tuple[NDArray[np.int64], NDArray[np.int64]],
-    bent: NDArray[np.bool_], obstacles: Obstacles, band: NDArray[np.int64], p: FloatArray,
-    q: FloatArray, r: float,
-) -> NDArray[np.bool_]:
-    """Whether segments ``p -> q`` across bands ``band`` keep ``r`` from every obstacle
-    (exact segment-to-edge distances; the ends lie outside every obstacle) and stay on the
-    shrunk road."""
-    ok = np.ones(len(band), dtype=bool)
-    be, edge = culled
-    if len(be) and len(band):
-        order = np.argsort(band, kind="stable")
-        ai, ei = _ragged_pairs(band[order], be, len(lines.lo) - 1)
-        ai = order[ai]
-        start, end, _ = polygon_edges(obstacles.vertices, obstacles.offsets)
-        a, b = start[edge[ei]], end[edge[ei]]
-        pa, qa = p[ai], q[ai]
-        near = ((np.minimum(pa[:, 0], qa[:, 0]) - r <= np.maximum(a[:, 0], b[:, 0]))
-                & (np.maximum(pa[:, 0], qa[:, 0]) + r >= np.minimum(a[:, 0], b[:, 0]))
-                & (np.minimum(pa[:, 1], qa[:, 1]) - r <= np.maximum(a[:, 1], b[:, 1]))
-                & (np.maximum(pa[:, 1], qa[:, 1]) + r >= np.minimum(a[:, 1], b[:, 1])))
-        ai = ai[near]
-        dist = _segment_distance(pa[near], qa[near], a[near], b[near])
-        ok[ai[dist < r - _EPS]] = False
-    return ok & _within_road(corridor, lines, bent, band, p, q)
+@njit(cache=True)
+def _point_segment(px: float, py: float, ax: float, ay: float, bx: float,
+                   by: float) -> float:  # pragma: no cover - compiled
+    """Distance [m] from point ``p`` to segment ``a -> b``."""
+    abx, aby = bx - ax, by - ay
+    apx, apy = px - ax, py - ay
+    den = abx * abx + aby * aby
+    t = min(max((apx * abx + apy * aby) / (den if den > 0 else 1.0), 0.0), 1.0)
+    return float(np.hypot(apx - t * abx, apy - t * aby))
 
 
-def _cross(ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray) -> FloatArray:
-    return np.asarray(ax * by - ay * bx)
-
-
-def _point_segment(p: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    ab = b - a
-    ap = p - a
-    den = ab[:, 0] ** 2 + ab[:, 1] ** 2
-    t = np.clip((ap[:, 0] * ab[:, 0] + ap[:, 1] * ab[:, 1]) / np.where(den > 0, den, 1.0),
-                0.0, 1.0)
-    dx = ap[:, 0] - t * ab[:, 0]
-    dy = ap[:, 1] - t * ab[:, 1]
-    return np.asarray(np.hypot(dx, dy))
-
-
-def _segment_distance(p: FloatArray, q: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray:
-    """Distance [m] between segments ``p -> q`` and ``a -> b``, row by row ``(n, 2)``."""
-    d = np.minimum(np.minimum(_point_segment(a, p, q), _point_segment(b, p, q)),
-                   np.minimum(_point_segment(p, a, b), _point_segment(q, a, b)))
-    pq, ab = q - p, b - a
-    o1 = _cross(pq[:, 0], pq[:, 1], a[:, 0] - p[:, 0], a[:, 1] - p[:, 1])
-    o2 = _cross(pq[:, 0], pq[:, 1], b[:, 0] - p[:, 0], b[:, 1] - p[:, 1])
-    o3 = _cross(ab[:, 0], ab[:, 1], p[:, 0] - a[:, 0], p[:, 1] - a[:, 1])
-    o4 = _cross(ab[:, 0], ab[:, 1], q[:, 0] - a[:, 0], q[:, 1] - a[:, 1])
-    proper = (o1 * o2 < 0) & (o3 * o4 < 0)
-    return np.where(proper, 0.0, d)
+@njit(cache=True)
+def _segment_distance(px: float, py: float, qx: float, qy: float, ax: float, ay: float,
+                      bx: float, by: float) -> float:  # pragma: no cover - compiled
+    """Distance [m] between segments ``p -> q`` and ``a -> b``."""
+    d = min(min(_point_segment(ax, ay, px, py, qx, qy), _point_segment(bx, by, px, py, qx, qy)),
+            min(_point_segment(px, py, ax, ay, bx, by), _point_segment(qx, qy, ax, ay, bx, by)))
+    pqx, pqy, abx, aby = qx - px, qy - py, bx - ax, by - ay
+    o1 = pqx * (ay - py) - pqy * (ax - px)
+    o2 = pqx * (by - py) - pqy * (bx - px)
+    o3 = abx * (py - ay) - aby * (px - ax)
+    o4 = abx * (qy - ay) - aby * (qx - ax)
+    return 0.0 if (o1 * o2 < 0) and (o3 * o4 < 0) else d
 
 
 def _bent_bands(corridor: Corridor, stations: FloatArray) -> NDArray[np.bool_]:
     """Whether the reference line or a boundary offset bends between consecutive
     stations ``(n - 1,)``."""
-    s = corridor.s
-    kink = np.zeros(len(s))
-    if len(s) > 2:
-        h = corridor.heading_at((s[:-1] + s[1:]) / 2.0)
-        ds = np.diff(s)
-        kink[1:-1] = ((np.abs(wrap_angle(np.diff(h))) > 1e-12)
-                      | (np.abs(np.diff(np.diff(corridor.left) / ds)) > 1e-12)
-                      | (np.abs(np.diff(np.diff(corridor.right) / ds)) > 1e-12))
-    ck = np.concatenate(([0.0], np.cumsum(kink)))
-    inner = (ck[np.searchsorted(s, stations[1:], side="left")]
-             - ck[np.searchsorted(s, stations[:-1], side="right")])
-    return np.asarray(inner > 0)
+    s = _f64(corridor.s)
+    if len(s) <= 2:
+        return np.zeros(max(len(stations) - 1, 0), dtype=bool)
+    turn = wrap_angle(np.diff(corridor.heading_at((s[:-1] + s[1:]) / 2.0)))
+    return _bent_kernel(s, _f64(turn), _f64(corridor.left), _f64(corridor.right),
+                        _f64(stations))
+
+
+@njit(cache=True)
+def _bent_kernel(s: FloatArray, turn: FloatArray, left: FloatArray, right: FloatArray,
+                 stations: FloatArray) -> NDArray[np.bool_]:  # pragma: no cover - compiled
+    """:func:`_bent_bands` given the reference's turn ``(n - 2,)`` [rad] at each inner
+    vertex: whether a vertex where the heading or a boundary's slope changes lies
+    strictly between consecutive stations."""
+    n = len(s)
+    count = np.zeros(n + 1, dtype=np.int64)  # kinks among vertices 0 .. i - 1
+    for i in range(n):
+        kink = False
+        if 0 < i < n - 1:
+            d0, d1 = s[i] - s[i - 1], s[i + 1] - s[i]
+            kink = (abs(turn[i - 1]) > 1e-12
+                    or abs((left[i + 1] - left[i]) / d1 - (left[i] - left[i - 1]) / d0) > 1e-12
+                    or abs((right[i + 1] - right[i]) / d1 - (right[i] - right[i - 1]) / d0)
+                    > 1e-12)
+        count[i + 1] = count[i] + (1 if kink else 0)
+    lo = np.searchsorted(s, stations[:-1], side="right")
+    hi = np.searchsorted(s, stations[1:], side="left")
+    out = np.empty(len(stations) - 1, dtype=np.bool_)
+    for b in range(len(out)):
+        out[b] = count[hi[b]] - count[lo[b]] > 0
+    return out
 
 
 def _within_road(
     corridor: Corridor, lines: _Lines, bent: NDArray[np.bool_], band: NDArray[np.int64],
-    p: FloatArray, q: FloatArray,
+    p: FloatArray, q: FloatArray, *, need: NDArray[np.bool_] | None = None,
 ) -> NDArray[np.bool_]:
     """Whether segments ``p -> q`` between lines ``band`` and ``band + 1`` stay on the
     shrunk road. Both ends do by construction; where the reference line and the boundary
     offsets are straight over the band the shrunk road is convex there and nothing is
     left to check; elsewhere the segment is checked at points at most
-    ``REFERENCE_SPACING / 2`` apart."""
+    ``REFERENCE_SPACING / 2`` apart (as many for every segment, the longest setting the
+    spacing); with ``need``, only those segments are checked (the others count as on the
+    road)."""
     ok = np.ones(len(band), dtype=bool)
     sel = np.flatnonzero(bent[band]) if len(band) else np.zeros(0, dtype=np.int64)
     if len(sel) == 0:
         return ok
     gap = float(np.max(np.hypot(*(q[sel] - p[sel]).T)))
     m = max(2, math.ceil(gap / (REFERENCE_SPACING / 2.0)))
+    if need is not None:
+        sel = sel[need[sel]]
+        if len(sel) == 0:
+            return ok
     f = np.arange(1, m) / m
     pts = p[sel, None, :] + f[None, :, None] * (q[sel] - p[sel])[:, None, :]
     sl = corridor.to_sl(pts.reshape(-1, 2))
@@ -717,43 +885,77 @@ def _search(
     through vertices at least as wide as the capped optimum. Returns the path's vertices
     and arcs (or None, None) and the last line that some path reaches.
     """
-    nv = len(width)
-    order = np.argsort(vline[arcs[:, 0]], kind="stable") if len(arcs) else np.zeros(0, int)
-    a_from = arcs[order, 0].tolist()
-    a_to = arcs[order, 1].tolist()
-    a_len = arc_len[order].tolist()
-    w = width.tolist()
-    best = [-math.inf] * nv
+    order = (np.argsort(vline[arcs[:, 0]], kind="stable") if len(arcs)
+             else np.zeros(0, dtype=np.int64))
+    a_from = np.ascontiguousarray(arcs[order, 0], dtype=np.int64)
+    a_to = np.ascontiguousarray(arcs[order, 1], dtype=np.int64)
+    path, steps, reached = _search_kernel(
+        int(source), a_from, a_to, np.ascontiguousarray(arc_len[order], dtype=float),
+        order.astype(np.int64), np.ascontiguousarray(width, dtype=float),
+        np.ascontiguousarray(vline, dtype=np.int64), int(nline), float(wmax))
+    if reached < nline - 1:
+        return None, None, int(reached)
+    return path, steps, nline - 1
+
+
+@njit(cache=True)
+def _search_kernel(source: int, a_from: NDArray[np.int64], a_to: NDArray[np.int64],
+                   a_len: FloatArray, a_idx: NDArray[np.int64], w: FloatArray,
+                   vline: NDArray[np.int64], nline: int, wmax: float
+                   ) -> tuple[NDArray[np.int64], NDArray[np.int64],
+                              int]:  # pragma: no cover - compiled
+    """:func:`_search` over arcs in topological order (``a_idx``: their indices in the
+    caller's arcs). Returns the path's vertices, its arcs and the last line reached (the
+    path is empty when that is not the last line)."""
+    nv = len(w)
+    best = np.full(nv, -np.inf)
     best[source] = w[source]
-    for u, v in zip(a_from, a_to, strict=True):
+    for e in range(len(a_from)):
+        u, v = a_from[e], a_to[e]
         bu = best[u]
         if bu > best[v]:
             cand = bu if bu < w[v] else w[v]
             if cand > best[v]:
                 best[v] = cand
-    best_arr = np.asarray(best)
-    goal_line = vline == nline - 1
-    if not np.any(goal_line & np.isfinite(best_arr)):
-        reached = vline[np.isfinite(best_arr)]
-        return None, None, int(reached.max()) if len(reached) else -1
-    target = min(float(best_arr[goal_line].max()), wmax)
-    dist = [math.inf] * nv
-    pred = [-1] * nv
+    top = -np.inf
+    reached = -1
+    for v in range(nv):
+        if np.isfinite(best[v]):
+            reached = max(reached, vline[v])
+            if vline[v] == nline - 1 and best[v] > top:
+                top = best[v]
+    empty = np.zeros(0, dtype=np.int64)
+    if reached < nline - 1 or not np.isfinite(top):
+        return empty, empty, reached
+    target = min(top, wmax)
+    dist = np.full(nv, np.inf)
+    pred = np.full(nv, -1, dtype=np.int64)
     dist[source] = 0.0
-    a_idx = order.tolist()
-    for u, v, ln, e in zip(a_from, a_to, a_len, a_idx, strict=True):
-        if w[v] >= target and dist[u] + ln < dist[v]:
-            dist[v] = dist[u] + ln
+    for e in range(len(a_from)):
+        u, v = a_from[e], a_to[e]
+        if w[v] >= target and dist[u] + a_len[e] < dist[v]:
+            dist[v] = dist[u] + a_len[e]
             pred[v] = e
-    dist_arr = np.where(goal_line, np.asarray(dist), np.inf)
-    v = int(np.argmin(dist_arr))
-    path, steps = [v], []
+    end = -1
+    d_end = np.inf
+    for v in range(nv):
+        if vline[v] == nline - 1 and (end < 0 or dist[v] < d_end):
+            end, d_end = v, dist[v]
+    n = 1
+    v = end
     while pred[v] >= 0:
-        steps.append(pred[v])
-        v = int(arcs[pred[v], 0])
-        path.append(v)
-    return (np.asarray(path[::-1], dtype=np.int64), np.asarray(steps[::-1], dtype=np.int64),
-            nline - 1)
+        v = a_from[pred[v]]
+        n += 1
+    path = np.empty(n, dtype=np.int64)
+    steps = np.empty(n - 1, dtype=np.int64)
+    v = end
+    path[n - 1] = v
+    for i in range(n - 2, -1, -1):
+        e = pred[v]
+        steps[i] = a_idx[e]
+        v = a_from[e]
+        path[i] = v
+    return path, steps, reached
 
 
 def _raise_blocked(corridor: Corridor, stations: FloatArray, line: int) -> None:

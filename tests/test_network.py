@@ -275,3 +275,21 @@ def test_corridor_through_junctions_is_paved_and_wide(start: str, goal: str) -> 
     outside = Polygon(cor.polygon()).buffer(0).difference(paved_area(path).buffer(0.05))
     junctions = len(route.edges) - 1
     assert outside.area <= 0.5 * max(junctions, 1), outside.area
+
+
+def test_corridor_bands_kept_per_network_give_the_same_corridor() -> None:
+    # the second corridor of a route reuses the network's bands: the same arrays as a
+    # corridor built on a fresh network, and the kept bands cannot be written to
+    net = load_network(NETS / "city.net.xml")
+    route = shortest_route(net, "SWA0", "G1G2")
+    first = route_corridor(net, route)
+    again = route_corridor(net, route)
+    fresh = route_corridor(load_network(NETS / "city.net.xml"), route)
+    for cor in (again, fresh):
+        for name in ("reference", "s", "left", "right", "edge_starts", "edge_ends"):
+            np.testing.assert_array_equal(getattr(cor, name), getattr(first, name))
+    assert net._bands
+    for band in net._bands.values():
+        if band is not None:
+            with pytest.raises(ValueError):
+                band[0][0, 0] = 0.0

@@ -69,3 +69,41 @@ def test_malformed_obstacles_raise() -> None:
         Obstacles.from_boxes([[0.0, 0.0]], [np.inf], [1.0], [1.0])
     with pytest.raises(GeometryError):
         Obstacles.from_boxes([[0.0, 0.0]], [0.0], [1.0], [1.0], reference="rear")  # type: ignore
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_elongated_matches_qhull_also_along_the_boxes_axes(seed: int) -> None:
+    # the same hull vertices, in the same cyclic order, as scipy's Qhull; also where the
+    # sweep runs along a box's own axis (corners that only rounding lifts off a side)
+    from scipy.spatial import ConvexHull
+
+    rng = np.random.default_rng(seed)
+    k = 40
+    pos = rng.uniform(-3000.0, 3000.0, (k, 2))
+    head = rng.choice([0.0, np.pi / 2, -np.pi / 2, np.pi, 0.3], k) + rng.choice(
+        [0.0, rng.uniform(-np.pi, np.pi)])
+    boxes = Obstacles.from_boxes(pos, head, rng.uniform(1.0, 8.0, k), rng.uniform(1.0, 3.0, k))
+    polys = Obstacles.from_polygons(
+        [pos[i] + rng.uniform(-5.0, 5.0, (int(rng.integers(3, 9)), 2)) for i in range(k)])
+    sweep = head + rng.choice([0.0, np.pi / 2, np.pi, 0.7], k)
+    for obs in (boxes, polys):
+        out = obs.elongated(sweep, 1.35)
+        assert out.ids == obs.ids
+        for i in range(k):
+            shift = 1.35 * np.array([np.cos(sweep[i]), np.sin(sweep[i])])
+            pts = np.concatenate((obs.polygon(i) + shift, obs.polygon(i) - shift))
+            ref = pts[ConvexHull(pts).vertices]
+            got = out.polygon(i)
+            assert len(got) == len(ref)
+            j = np.flatnonzero((got == ref[0]).all(axis=1))
+            assert len(j) == 1
+            np.testing.assert_array_equal(np.roll(got, -j[0], axis=0), ref)
+
+
+def test_elongated_rejects_bad_input_and_keeps_zero() -> None:
+    obs = Obstacles.from_boxes([[0.0, 0.0]], [0.0], [4.0], [2.0])
+    assert obs.elongated([0.0], 0.0) is obs
+    with pytest.raises(GeometryError, match="elongation"):
+        obs.elongated([0.0], -1.0)
+    with pytest.raises(GeometryError, match="directions"):
+        obs.elongated([np.nan], 1.0)

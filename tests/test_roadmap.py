@@ -429,3 +429,100 @@ def test_malformed_obstacles_raise() -> None:
         Obstacles.from_polygons([np.array([[0, 0], [1, 0], [np.nan, 1]])])
     with pytest.raises(GeometryError):
         Obstacles.from_boxes([[0.0, 0.0]], [0.0], [-1.0], [1.0])
+
+
+# -- compiled helpers against independent references ---------------------------------------
+def test_segment_distance_matches_shapely() -> None:
+    from splineplan.roadmap import _segment_distance
+
+    rng = np.random.default_rng(5)
+    for _ in range(400):
+        p, q, a, b = rng.integers(-3, 4, (4, 2)) * 0.5 + rng.choice([0.0, 1.0]) * rng.normal(
+            0.0, 0.3, (4, 2))  # grid points too: touching, collinear and crossing cases
+        got = _segment_distance(*p, *q, *a, *b)
+        want = LineString([p, q]).distance(LineString([a, b])) if not (
+            np.array_equal(p, q) or np.array_equal(a, b)) else shapely.distance(
+            shapely.Point(p) if np.array_equal(p, q) else LineString([p, q]),
+            shapely.Point(a) if np.array_equal(a, b) else LineString([a, b]))
+        assert got == pytest.approx(want, abs=1e-12)
+
+
+def test_search_is_widest_then_shortest_by_enumeration() -> None:
+    # a layered graph (arcs from line k to k + 1) against all source-to-goal paths
+    from splineplan.roadmap import _search
+
+    rng = np.random.default_rng(2)
+    for _ in range(60):
+        nline = int(rng.integers(2, 6))
+        per = rng.integers(1, 4, nline)
+        vline = np.repeat(np.arange(nline), per).astype(np.int64)
+        width = np.round(rng.uniform(0.0, 5.0, len(vline)), 1)
+        arcs = np.array([(u, v) for u in range(len(vline)) for v in range(len(vline))
+                         if vline[v] == vline[u] + 1 and rng.random() < 0.7],
+                        dtype=np.int64).reshape(-1, 2)
+        arcs = arcs[rng.permutation(len(arcs))]
+        arc_len = np.round(rng.uniform(1.0, 3.0, len(arcs)), 1)
+        wmax = 3.5
+        best = None
+        by_arc = {(int(u), int(v)): e for e, (u, v) in enumerate(arcs)}
+        for combo in itertools.product(*[np.flatnonzero(vline == k) for k in range(1, nline)]):
+            path = (0, *combo)
+            steps = [by_arc.get((int(u), int(v))) for u, v in itertools.pairwise(path)]
+            if None in steps:
+                continue
+            key = (-min(float(width[list(path)].min()), wmax), float(arc_len[steps].sum()))
+            best = key if best is None or key < best else best
+        path, steps, reached = _search(0, arcs, arc_len, width, vline, nline, wmax)
+        if best is None:
+            assert path is None and reached < nline - 1
+            continue
+        assert path is not None and steps is not None and reached == nline - 1
+        np.testing.assert_array_equal(arcs[steps, 0], path[:-1])
+        np.testing.assert_array_equal(arcs[steps, 1], path[1:])
+        assert path[0] == 0 and vline[path[-1]] == nline - 1
+        got = (-min(float(width[path].min()), wmax), float(arc_len[steps].sum()))
+        assert got[0] == best[0] and got[1] == pytest.approx(best[1])
+
+
+def test_bent_bands_match_the_array_formula() -> None:
+    from splineplan.geometry import wrap_angle
+    from splineplan.roadmap import _bent_bands
+
+    rng = np.random.default_rng(3)
+    for trial in range(30):
+        n = int(rng.integers(2, 12))
+        ref = np.cumsum(rng.uniform(0.5, 4.0, (n, 2)) * [1.0, rng.choice([0.0, 0.3])], axis=0)
+        left = np.full(n, 3.0) if trial % 2 else rng.uniform(2.0, 4.0, n)
+        corridor = Corridor.from_reference(ref, left, -left)
+        stations = np.sort(rng.uniform(0.0, corridor.length, int(rng.integers(2, 20))))
+        # the formula the compiled loop replaces
+        s = corridor.s
+        kink = np.zeros(len(s))
+        if len(s) > 2:
+            h = corridor.heading_at((s[:-1] + s[1:]) / 2.0)
+            ds = np.diff(s)
+            kink[1:-1] = ((np.abs(wrap_angle(np.diff(h))) > 1e-12)
+                          | (np.abs(np.diff(np.diff(corridor.left) / ds)) > 1e-12)
+                          | (np.abs(np.diff(np.diff(corridor.right) / ds)) > 1e-12))
+        ck = np.concatenate(([0.0], np.cumsum(kink)))
+        want = (ck[np.searchsorted(s, stations[1:], side="left")]
+                - ck[np.searchsorted(s, stations[:-1], side="right")]) > 0
+        np.testing.assert_array_equal(_bent_bands(corridor, stations), want)
+
+
+def test_cull_finds_every_box_pair_within_reach() -> None:
+    from splineplan.roadmap import _cull
+
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        a = rng.uniform(0.0, 50.0, (int(rng.integers(1, 30)), 2))
+        b = a + rng.normal(0.0, 3.0, a.shape)
+        lo = rng.uniform(0.0, 50.0, (int(rng.integers(1, 30)), 2))
+        bbox = np.hstack((lo, lo + rng.uniform(0.1, 8.0, lo.shape)))
+        r = float(rng.uniform(0.0, 2.0))
+        s_lo, s_hi = np.minimum(a, b) - r, np.maximum(a, b) + r
+        want = [(i, j) for i in range(len(a)) for j in range(len(bbox))
+                if s_lo[i, 0] <= bbox[j, 2] and s_hi[i, 0] >= bbox[j, 0]
+                and s_lo[i, 1] <= bbox[j, 3] and s_hi[i, 1] >= bbox[j, 1]]
+        i, j = _cull(a, b, bbox, r)
+        assert list(zip(i.tolist(), j.tolist(), strict=True)) == want
