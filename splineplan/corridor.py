@@ -9,6 +9,7 @@ station s is ``right(s) <= l <= left(s)``. No SUMO here: the SUMO adapter
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numba import njit
@@ -21,6 +22,11 @@ from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations, 
 #: Spacing [m] at which reference lines are resampled.
 REFERENCE_SPACING = 0.5
 
+
+#: Smallest cell [m] of the bucket grid that finds a point's nearest reference vertex.
+GRID_CELL = 2.0
+#: Rings of cells searched around a point before a k-d tree takes over (far points).
+GRID_RINGS = 8
 
 #: Offset [m] that stands for "no bound" in a corridor's keep offsets.
 UNBOUNDED = 1e9
@@ -66,7 +72,7 @@ class Corridor:
     keep_left: FloatArray | None = None
     keep_right: FloatArray | None = None
     edge_ends: FloatArray = field(default_factory=lambda: np.zeros(0))
-    _tree: cKDTree = field(init=False, repr=False)
+    _grid: tuple[Any, ...] = field(init=False, repr=False)
     _heading: FloatArray = field(init=False, repr=False)
     _cos: FloatArray = field(init=False, repr=False)
     _sin: FloatArray = field(init=False, repr=False)
@@ -98,11 +104,14 @@ class Corridor:
         object.__setattr__(self, "_heading", np.arctan2(d[:, 1], d[:, 0]))
         object.__setattr__(self, "_cos", np.cos(self._heading))
         object.__setattr__(self, "_sin", np.sin(self._heading))
-        object.__setattr__(self, "_tree", cKDTree(self.reference))
         # writable contiguous copies for the compiled projection (one array type)
         object.__setattr__(self, "_ref_x", np.array(self.reference[:, 0], dtype=float))
         object.__setattr__(self, "_ref_y", np.array(self.reference[:, 1], dtype=float))
         object.__setattr__(self, "_s", np.array(self.s, dtype=float))
+        # a bucket grid of the reference's vertices for nearest-vertex queries
+        area = float(np.ptp(self._ref_x) * np.ptp(self._ref_y))
+        cell = max(GRID_CELL, float(np.sqrt(area / (4.0 * len(self.reference)))))
+        object.__setattr__(self, "_grid", (cell, *_grid_build(self._ref_x, self._ref_y, cell)))
 
     # -- construction -------------------------------------------------------------------
     @classmethod
@@ -208,10 +217,13 @@ class Corridor:
         the ends are extrapolated along the end segments.
         """
         pts = np.atleast_2d(np.asarray(xy, dtype=float))
-        _, k = self._tree.query(pts)
-        return _project_kernel(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
-                               np.asarray(k, dtype=np.int64), self._ref_x, self._ref_y,
-                               self._cos, self._sin, self._s)
+        px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+        k = _grid_nearest(px, py, self._ref_x, self._ref_y, *self._grid, GRID_RINGS)
+        far = np.flatnonzero(k < 0)
+        if len(far):  # far from the road (or not a number): a k-d tree
+            k[far] = cKDTree(self.reference).query(pts[far])[1]
+        return _project_kernel(px, py, k, self._ref_x, self._ref_y, self._cos, self._sin,
+                               self._s)
 
     def contains(self, xy: ArrayLike, margin: float = 0.0) -> np.ndarray:
         """Whether points ``(n, 2)`` lie on the road, at least ``margin`` [m] inside."""
@@ -291,6 +303,63 @@ class Corridor:
         sl = self.to_sl(boundary)
         order = np.argsort(sl[:, 0], kind="stable")
         return np.interp(self.s, sl[order, 0], sl[order, 1])
+
+
+@njit(cache=True)
+def _grid_build(rx: FloatArray, ry: FloatArray, cell: float
+                ) -> tuple[float, float, int, int, NDArray[np.int64],
+                           NDArray[np.int64]]:  # pragma: no cover - compiled
+    """A bucket grid of points ``rx``, ``ry`` with square cells of ``cell`` [m]: its
+    origin, size in cells, and per cell (row-major) the start of its points in ``order``."""
+    x0, y0 = rx.min(), ry.min()
+    nx = int((rx.max() - x0) / cell) + 1
+    ny = int((ry.max() - y0) / cell) + 1
+    key = np.empty(len(rx), dtype=np.int64)
+    for v in range(len(rx)):
+        key[v] = int((rx[v] - x0) / cell) * ny + int((ry[v] - y0) / cell)
+    order = np.argsort(key, kind="mergesort")
+    start = np.zeros(nx * ny + 1, dtype=np.int64)
+    for v in range(len(rx)):
+        start[key[v] + 1] += 1
+    return x0, y0, nx, ny, np.cumsum(start), order
+
+
+@njit(cache=True)
+def _grid_nearest(px: FloatArray, py: FloatArray, rx: FloatArray, ry: FloatArray,
+                  cell: float, x0: float, y0: float, nx: int, ny: int,
+                  start: NDArray[np.int64], order: NDArray[np.int64], rings: int
+                  ) -> NDArray[np.int64]:  # pragma: no cover - compiled
+    """Index of the nearest of the points ``rx``, ``ry`` (the lowest among equals) to
+    each point, from their bucket grid (:func:`_grid_build`), searched ring by ring of
+    cells around the point's cell; -1 where ``rings`` rings found none provably nearest."""
+    out = np.full(len(px), -1, dtype=np.int64)
+    for j in range(len(px)):
+        if not (np.isfinite(px[j]) and np.isfinite(py[j])):
+            continue
+        fx, fy = (px[j] - x0) / cell, (py[j] - y0) / cell
+        if not (-rings <= fx <= nx + rings and -rings <= fy <= ny + rings):
+            continue
+        cx, cy = int(np.floor(fx)), int(np.floor(fy))
+        best, pick = np.inf, -1
+        for r in range(rings + 1):
+            for ix in range(max(cx - r, 0), min(cx + r, nx - 1) + 1):
+                edge = abs(ix - cx) == r
+                step = 1 if edge else 2 * r
+                iy = cy - r
+                while iy <= cy + r:
+                    if 0 <= iy < ny:
+                        c = ix * ny + iy
+                        for q in range(start[c], start[c + 1]):
+                            v = order[q]
+                            d = (rx[v] - px[j]) ** 2 + (ry[v] - py[j]) ** 2
+                            if d < best or (d == best and v < pick):
+                                best, pick = d, v
+                    iy += step
+            # every point of the rings beyond lies at least r cells away
+            if pick >= 0 and np.sqrt(best) <= r * cell:
+                out[j] = pick
+                break
+    return out
 
 
 @njit(cache=True)

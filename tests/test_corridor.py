@@ -145,3 +145,40 @@ def test_keep_offsets_are_checked_sliced_and_unbounded_by_default() -> None:
     with pytest.raises(GeometryError, match="keep offsets"):
         Corridor(plain.reference, plain.s, plain.left, plain.right,
                  keep_left=keep_l[: n - 1], keep_right=keep_r[: n - 1])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 10_000), st.sampled_from(["spiral", "hairpin", "straight"]))
+def test_nearest_reference_vertex_from_the_bucket_grid_is_the_true_nearest(
+        seed: int, shape: str) -> None:
+    """to_sl's nearest-vertex search (a bucket grid; -1 hands far points to a k-d tree)
+    against brute force, on reference lines that come back near themselves; and to_sl
+    against the same projection from the k-d tree's nearest vertex."""
+    from scipy.spatial import cKDTree
+    from scipy.spatial.distance import cdist
+
+    from splineplan.corridor import GRID_RINGS, _grid_nearest, _project_kernel
+
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0.0, 1.0, 400)
+    if shape == "spiral":
+        ref = np.column_stack((np.cos(9 * t) * (20 + 60 * t), np.sin(9 * t) * (20 + 60 * t)))
+    elif shape == "hairpin":
+        ref = np.column_stack((np.where(t < 0.5, 200 * t, 200 * (1 - t)),
+                               np.where(t < 0.5, 0.0, 7.0) + np.sin(40 * t)))
+    else:
+        ref = np.column_stack((300 * t, np.zeros_like(t)))
+    road = Corridor.from_reference(ref, np.full(len(t), 3.0), np.full(len(t), -3.0))
+    near = road.reference[rng.integers(0, len(road.reference), 300)] + rng.normal(0, 3, (300, 2))
+    far = rng.uniform(-500, 500, (30, 2))
+    pts = np.vstack((near, far))
+    px, py = pts[:, 0].copy(), pts[:, 1].copy()
+    got = _grid_nearest(px, py, road._ref_x, road._ref_y, *road._grid, GRID_RINGS)
+    want = np.argmin(cdist(pts, road.reference), axis=1)
+    found = got >= 0
+    assert found[:300].all()  # points within a few metres of the road: never the tree
+    np.testing.assert_array_equal(got[found], want[found])
+    k = cKDTree(road.reference).query(pts)[1].astype(np.int64)
+    np.testing.assert_array_equal(
+        road.to_sl(pts),
+        _project_kernel(px, py, k, road._ref_x, road._ref_y, road._cos, road._sin, road._s))
