@@ -49,7 +49,7 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
     """Time the pipeline on ``n_routes`` routes of about 2 km; print and return medians."""
     from splineplan.errors import SplineplanError
     from splineplan.network import load_network
-    from splineplan.pipeline import plan
+    from splineplan.pipeline import plan, turnarounds
     from splineplan.route import shortest_route
 
     net = load_network(path)
@@ -57,6 +57,7 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
     usable = [e for e in net.edge_ids if net.allows(e, "passenger")]
     rows: list[tuple[float, int, float, float, float, float]] = []
     feasible: list[bool] = []
+    turning: list[bool] = []  # the route turns back (a dead end): no forward-only path
     failures: list[str] = []
     tries = 0
     while len(rows) < n_routes and tries < 200 * n_routes:
@@ -81,6 +82,7 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
         best = min(times)
         rows.append((route.length, len(obstacles), *best))
         feasible.append(bool(p.trajectory.feasible))
+        turning.append(bool(turnarounds(net, p.route)))
     if not rows:
         print(f"{path.name}: no route planned ({len(failures)} failures)")
         return {}
@@ -94,6 +96,11 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
           f"{med['level2']:.1f}, level 3 {med['level3']:.1f}); planning failed on "
           f"{len(failures)} of {len(rows) + len(failures)} routes; trajectory feasible on "
           f"{sum(feasible)} of {len(feasible)}")
+    forward = [f for f, t in zip(feasible, turning, strict=True) if not t]
+    if len(forward) < len(feasible):
+        print(f"  {len(feasible) - len(forward)} of the routes must turn back (every route "
+              f"between their edges has a U-turn, which forward planning cannot drive); "
+              f"feasible on {sum(forward)} of the other {len(forward)}")
     for f in failures[:5]:
         print(f"  failed: {f}")
     per_km = 1e3 * arr[:, 2] / (arr[:, 0] / 1e3)
