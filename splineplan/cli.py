@@ -356,12 +356,22 @@ def _registry() -> dict[str, Callable[[argparse._SubParsersAction], None]]:
             if name.startswith("_add_") and callable(fn)}
 
 
+#: Commands that run the planner (the first use of an install compiles its inner loops).
+_PLANNING = ("plan", "plan-image", "simulate", "bench")
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``splineplan`` console script."""
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    if args.command in _PLANNING:
+        from splineplan.kernels import cached
+
+        if not cached():
+            print(f"splineplan {args.command}: compiling the planner's inner loops on first use "
+                  "(about 30 s; cached for later runs)", file=sys.stderr)
     try:
         return int(args.func(args))
     except SplineplanError as err:
