@@ -98,9 +98,12 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
           f"{sum(feasible)} of {len(feasible)}")
     forward = [f for f, t in zip(feasible, turning, strict=True) if not t]
     if len(forward) < len(feasible):
+        fwd_total = [r[2] for r, t in zip(rows, turning, strict=True) if not t]
+        med["forward_total"] = 1e3 * float(np.median(fwd_total)) if fwd_total else np.nan
         print(f"  {len(feasible) - len(forward)} of the routes must turn back (every route "
               f"between their edges has a U-turn, which forward planning cannot drive); "
-              f"feasible on {sum(forward)} of the other {len(forward)}")
+              f"the other {len(forward)}: median total {med['forward_total']:.1f} ms, "
+              f"feasible on {sum(forward)}")
     for f in failures[:5]:
         print(f"  failed: {f}")
     per_km = 1e3 * arr[:, 2] / (arr[:, 0] / 1e3)

@@ -60,7 +60,7 @@ def lower(a: FloatArray, x: float) -> int:  # pragma: no cover - compiled
     return lo
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def segment(st: FloatArray, s: float, guess: int = -1) -> int:  # pragma: no cover
     """Reference segment holding station ``s`` (``st``: the vertices' stations), the end
     segments beyond the ends: ``np.searchsorted(st[1:-1], s, side="right")``. From a
@@ -78,7 +78,7 @@ def segment(st: FloatArray, s: float, guess: int = -1) -> int:  # pragma: no cov
     return upper(st[1:-1], s)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def interp_near(x: float, xp: FloatArray, fp: FloatArray, guess: int) -> float:
     """``np.interp`` at one point, searching from the interval ``guess`` nearby."""
     n = len(xp)
