@@ -572,20 +572,6 @@ def _free_kernel(li: NDArray[np.int64], ob: NDArray[np.int64], cx: FloatArray, c
     return f_line[:nf].copy(), f_lo[:nf].copy(), f_hi[:nf].copy()
 
 
-def _ragged_pairs(
-    ga: NDArray[np.int64], gb: NDArray[np.int64], ngroup: int
-) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """All pairs (i, j) with ``ga[i] == gb[j]``; ``ga`` and ``gb`` sorted group labels."""
-    ca = np.bincount(ga, minlength=ngroup)
-    cb = np.bincount(gb, minlength=ngroup)
-    sa = np.cumsum(ca) - ca
-    sb = np.cumsum(cb) - cb
-    p = ca * cb
-    grp = np.repeat(np.arange(ngroup), p)
-    j = np.arange(int(p.sum())) - np.repeat(np.cumsum(p) - p, p)
-    return sa[grp] + j // cb[grp], sb[grp] + j % cb[grp]
-
-
 #: Where, as fractions of the common lateral range of two intervals, the link between
 #: them is tried when the straight segment between their midpoints is not free.
 _OVERLAP_TRIES = (0.5, 0.25, 0.75, 0.05, 0.95)
