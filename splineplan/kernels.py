@@ -115,8 +115,15 @@ def road_one(x: float, y: float, h: float, sc: float, st: FloatArray, rx: FloatA
         if p == len(bu) - 1:  # the centre
             station = along
         else:
-            to_left = min(to_left, interp_near(along, st, left, i) - lat)
-            to_right = min(to_right, lat - interp_near(along, st, right, i))
+            if st[i] <= along < st[i + 1]:  # np.interp's interval is i: no search
+                ds = st[i + 1] - st[i]
+                lv = (left[i + 1] - left[i]) / ds * (along - st[i]) + left[i]
+                rv = (right[i + 1] - right[i]) / ds * (along - st[i]) + right[i]
+            else:
+                lv = interp_near(along, st, left, i)
+                rv = interp_near(along, st, right, i)
+            to_left = min(to_left, lv - lat)
+            to_right = min(to_right, lat - rv)
     if min(to_left, to_right) < band:
         # the edges' inward vertices near the centre's station, by rectangle-point distance
         for k in range(lower(cs, station - reach), upper(cs, station + reach)):
