@@ -130,6 +130,9 @@ def road_one(x: float, y: float, h: float, sc: float, st: FloatArray, rx: FloatA
             dx, dy = cx[k] - x, cy[k] - y
             gu = abs(dx * c + dy * s) - hl
             gv = abs(dy * c - dx * s) - hw
+            now = to_left if cside[k] > 0 else to_right
+            if max(gu, gv) >= now:
+                continue  # the distance is at least max(gu, gv): it cannot lower the side's
             inside = gu <= 0 and gv <= 0
             d = max(gu, gv) if inside else np.hypot(max(gu, 0.0), max(gv, 0.0))
             if cside[k] > 0:
