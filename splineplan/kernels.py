@@ -131,8 +131,8 @@ def road_one(x: float, y: float, h: float, sc: float, st: FloatArray, rx: FloatA
             gu = abs(dx * c + dy * s) - hl
             gv = abs(dy * c - dx * s) - hw
             now = to_left if cside[k] > 0 else to_right
-            if max(gu, gv) >= now:
-                continue  # the distance is at least max(gu, gv): it cannot lower the side's
+            if max(gu, gv) >= now:  # the distance is at least max(gu, gv): no lower
+                continue
             inside = gu <= 0 and gv <= 0
             d = max(gu, gv) if inside else np.hypot(max(gu, 0.0), max(gv, 0.0))
             if cside[k] > 0:
