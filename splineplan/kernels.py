@@ -387,17 +387,21 @@ def try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: F
             e2[t, 1] = d2[j, 1] + basis[2, r, j] * dy
             kap[t] = abs(curvature(e1[t, 0], e1[t, 1], e2[t, 0], e2[t, 1]))
             head[t] = np.arctan2(e1[t, 1], e1[t, 0])
+        # the curvature first: where it refuses the move, no footprint check is needed
+        new_k = old_k = kappa_max
+        for t in range(q):
+            new_k, old_k = max(new_k, kap[t]), max(old_k, kappa[a + t])
+        if new_k > old_k + 1e-12:
+            continue
         sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
         worse = False
-        new_k = old_k = kappa_max
         new_v = old_v = 0.0
         for t in range(q):
             j = a + t
             if slack[j] >= 0 and sl[t] < 0:
                 worse = True
-            new_k, old_k = max(new_k, kap[t]), max(old_k, kappa[j])
             new_v, old_v = max(new_v, -sl[t]), max(old_v, -slack[j])
-        if worse or new_k > old_k + 1e-12 or new_v > old_v + 1e-12:
+        if worse or new_v > old_v + 1e-12:
             continue
         acc[m] = True
         for t in range(q):
