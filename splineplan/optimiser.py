@@ -49,7 +49,7 @@ def _basis(u: FloatArray, t: FloatArray, k: int, n: int) -> tuple[NDArray[np.int
                          np.ascontiguousarray(t, dtype=float), k, n)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _ratio(a: float, b: float) -> float:  # pragma: no cover - compiled
     """``a / b`` where ``b > 0``, else 0."""
     return a / b if b > 0 else 0.0
@@ -67,8 +67,14 @@ def _basis_kernel(u: FloatArray, t: FloatArray, k: int, n: int
     tables = np.zeros((k + 1, k + 1))
     ext = np.zeros(k + 3)
     der = np.zeros(k + 1)
+    span = k
     for j in range(m):
-        span = min(max(np.searchsorted(t, u[j], side="right") - 1, k), n - 1)
+        # the knot span: t[span] <= u[j] < t[span + 1], within k .. n - 1 (walking on from
+        # the last sample's: samples ascend)
+        if u[j] < t[span]:
+            span = k
+        while span < n - 1 and t[span + 1] <= u[j]:
+            span += 1
         first[j] = span - k
         # the knots around the sample: tt[r] = t[span + r - k], r = 0 .. 2k + 1
         for r in range(2 * k + 2):
@@ -90,7 +96,7 @@ def _basis_kernel(u: FloatArray, t: FloatArray, k: int, n: int
     return first, vals
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _derive_into(b: FloatArray, tt: FloatArray, k: int, p: int,
                  out: FloatArray) -> None:  # pragma: no cover - compiled
     """Parameter derivatives ``(p + 1,)`` of the degree-``p`` basis functions

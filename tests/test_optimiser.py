@@ -47,3 +47,21 @@ def test_independent_moves_are_worst_first_and_apart(bad_list: list[float], k: i
             if i not in chosen:
                 near = chosen[np.abs(chosen - i) <= k]
                 assert len(near) and bad[near].max() >= bad[i]
+
+
+def test_basis_at_unsorted_parameters_matches_scipy() -> None:
+    """The basis walks from one sample's knot span to the next: parameters in any order
+    (and the ends, 0 and 1) still get their own spans."""
+    from splineplan.optimiser import _basis, _knots
+
+    rng = np.random.default_rng(7)
+    n, k = 9, 3
+    ctrl = rng.normal(size=(n, 2))
+    t = _knots(n, k)
+    u = np.concatenate((rng.uniform(0, 1, 50), [1.0, 0.0, 0.5, 1.0]))
+    first, vals = _basis(u, t, k, n)
+    spline = BSpline(t, ctrl, k)
+    cols = first + np.arange(k + 1)[:, None]
+    for nu in range(3):
+        got = np.stack([(vals[nu] * ctrl[:, d][cols]).sum(axis=0) for d in range(2)], axis=1)
+        np.testing.assert_allclose(got, spline(u, nu), rtol=1e-9, atol=1e-9)
