@@ -170,6 +170,15 @@ def plan_corridor(
     return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
 
 
+def warm_up() -> None:
+    """Load levels 2 and 3's compiled loops (compile them, on the first run of an
+    install) by planning a short straight road with one obstacle, so that a closed loop's
+    first replan does not pay for it."""
+    road = Corridor.from_boundaries([[0.0, 3.5], [60.0, 3.5]], [[0.0, -3.5], [60.0, -3.5]])
+    cars = Obstacles.from_boxes([[30.0, 1.5]], [0.0], 4.5, 1.8)
+    plan_corridor(road, cars, [1.0, -1.5], 0.0)
+
+
 def _infeasible_samples(tr: Trajectory, kappa_max: float) -> NDArray[np.bool_]:
     """Per sample: curvature over ``kappa_max`` [1/m], or the footprint within the margin
     (with level 3's tolerance for rounding)."""

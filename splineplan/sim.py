@@ -428,6 +428,10 @@ class _Run:
             raise ScenarioError(f"{sc.name}: ego.goal_pos {ego.goal_pos} m is beyond the end of "
                                 f"goal edge '{ego.goal_edge}' ({goal_len:.1f} m)")
         self._set_route(route_corridor(self.net, route, vclass=ego.vclass), route.edges)
+        if self.driver == "planner":
+            from splineplan.planner import warm_up
+
+            warm_up()  # the compiled loops, loaded before the loop rather than in a replan
         self.road = RoadCheck(self.net, ego.vclass)
         self.route_length = route.length
         for p in (*sc.routes, *sc.additional):
