@@ -167,17 +167,26 @@ class _Curve:
     def evaluate(self, ctrl: FloatArray | None = None) -> tuple[FloatArray, FloatArray,
                                                                   FloatArray]:
         """Positions, first and second parameter derivatives ``(m, 2)`` at the samples."""
-        c = self.ctrl if ctrl is None else ctrl
-        cols = self.first + np.arange(self.k + 1)[:, None]
-        gx, gy = c[:, 0][cols], c[:, 1][cols]  # (k + 1, m)
-        out = []
-        for b in self.basis:
-            x, y = b[0] * gx[0], b[0] * gy[0]
-            for j in range(1, self.k + 1):
-                x += b[j] * gx[j]
-                y += b[j] * gy[j]
-            out.append(np.column_stack((x, y)))
-        return out[0], out[1], out[2]
+        c = np.ascontiguousarray(self.ctrl if ctrl is None else ctrl, dtype=float)
+        return _evaluate_kernel(c, self.first, self.basis, self.k)
+
+
+@njit(cache=True)
+def _evaluate_kernel(ctrl: FloatArray, first: NDArray[np.int64], basis: FloatArray, k: int
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
+    """:meth:`_Curve.evaluate`: per sample and derivative order, the basis-weighted sum of
+    the ``k + 1`` shaping control points, in their order."""
+    m = len(first)
+    out = np.empty((3, m, 2))
+    for nu in range(3):
+        for j in range(m):
+            f = first[j]
+            x, y = basis[nu, 0, j] * ctrl[f, 0], basis[nu, 0, j] * ctrl[f, 1]
+            for r in range(1, k + 1):
+                x += basis[nu, r, j] * ctrl[f + r, 0]
+                y += basis[nu, r, j] * ctrl[f + r, 1]
+            out[nu, j, 0], out[nu, j, 1] = x, y
+    return out[0].copy(), out[1].copy(), out[2].copy()
 
 
 def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
