@@ -44,8 +44,21 @@ log = logging.getLogger(__name__)
 
 #: The drivers of every case, in the order of the rows.
 DRIVERS = ("planner", "sumo", "sublane")
+
+
+def _project_root() -> Path:
+    """The folder holding the bundled ``sumo_nets/`` and ``scenarios/``: the project's
+    checkout beside the package (an editable install), else the working directory (the
+    project's folder, after ``pip install .``)."""
+    here = Path(__file__).resolve().parent.parent
+    for root in (here, Path.cwd()):
+        if (root / "sumo_nets").is_dir() and (root / "scenarios").is_dir():
+            return root
+    return here
+
+
 #: Folder of the bundled scenarios and networks.
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = _project_root()
 SCENARIOS = ROOT / "scenarios"
 NETS = ROOT / "sumo_nets"
 
@@ -228,6 +241,10 @@ def build_suite(
     suite_tiers: tuple[str, ...] = ()
     p = Path(suite)
     if suite in SUITES:
+        if not (NETS.is_dir() and SCENARIOS.is_dir()):
+            raise ParameterError(
+                f"suite '{suite}' needs the project's bundled sumo_nets/ and scenarios/ "
+                f"folders; run it from the project's folder (not found in {ROOT})")
         spec = SUITES[suite]
         bundled = [SCENARIOS / f"{n}.toml" for n in spec["bundled"]]
         roads, suite_tiers = spec["roads"], spec["tiers"]
