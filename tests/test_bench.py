@@ -182,3 +182,23 @@ def test_suite_building_and_bad_input(tmp_path: Path) -> None:
         bench.build_suite("quick", tiers=["hard"], out_dir=tmp_path)
     with pytest.raises(ParameterError, match="unknown driver"):
         bench.run_suite(cases, out_dir=tmp_path, drivers=("autopilot",), progress=False)
+
+
+def test_bundled_files_are_found_in_the_working_directory_after_a_plain_install(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """After ``pip install .`` the package sits in site-packages without the project's
+    sumo_nets/ and scenarios/: they are looked for in the working directory, and a named
+    suite without them is a clear error."""
+    site = tmp_path / "site-packages" / "splineplan"
+    site.mkdir(parents=True)
+    project = tmp_path / "project"
+    (project / "sumo_nets").mkdir(parents=True)
+    (project / "scenarios").mkdir()
+    monkeypatch.setattr(bench, "__file__", str(site / "bench.py"))
+    monkeypatch.chdir(project)
+    assert bench._project_root() == project
+    monkeypatch.chdir(tmp_path)
+    assert bench._project_root() == site.parent  # neither: beside the package, as before
+    monkeypatch.setattr(bench, "NETS", site.parent / "sumo_nets")
+    with pytest.raises(ParameterError, match="run it from the project's folder"):
+        bench.build_suite("default", out_dir=tmp_path / "out")
