@@ -370,7 +370,6 @@ class _Optimiser:
         self.first, self.basis, self.k = first, curve.basis, k
         self.checker, self.params = checker, params
         n = len(self.ctrl)
-        self.n = n
         cols = first[:, None] + np.arange(k + 1)[None, :]
         self.pos, self.d1, self.d2, self.slack, self.station = (a.copy() for a in samples)
         self.kappa = np.abs(curvature_from_derivatives(self.d1, self.d2))

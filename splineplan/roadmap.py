@@ -508,6 +508,8 @@ def _free_kernel(li: NDArray[np.int64], ob: NDArray[np.int64], cx: FloatArray, c
     rel_lo = np.empty(2 * nedge + 1)
     rel_hi = np.empty(2 * nedge + 1)
     cross = np.empty(nedge + 1)
+    eu_a, ev_a = np.empty(nedge + 1), np.empty(nedge + 1)
+    eu_b, ev_b = np.empty(nedge + 1), np.empty(nedge + 1)
     run = -np.inf
     p = 0
     for k in range(nline):
@@ -518,28 +520,25 @@ def _free_kernel(li: NDArray[np.int64], ob: NDArray[np.int64], cx: FloatArray, c
             continue
         lo_k, hi_k = lo[k], hi[k]
         nb = 0
-        for q in range(p0, p):  # the capsules
+        for q in range(p0, p):  # the capsules; the edges in the line's frame, kept
             for e in range(offsets[ob[q]], offsets[ob[q] + 1]):
                 e1 = e + 1 if e + 1 < offsets[ob[q] + 1] else offsets[ob[q]]
                 wax, way = vx[e] - cx[k], vy[e] - cy[k]
                 wbx, wby = vx[e1] - cx[k], vy[e1] - cy[k]
-                ua = wax * tx[k] + way * ty[k]
-                va = wax * nx[k] + way * ny[k]
-                ub = wbx * tx[k] + wby * ty[k]
-                vb = wbx * nx[k] + wby * ny[k]
-                b_lo[nb], b_hi[nb] = _capsule_on_line(ua, va, ub, vb, r)
+                eu_a[nb] = wax * tx[k] + way * ty[k]
+                ev_a[nb] = wax * nx[k] + way * ny[k]
+                eu_b[nb] = wbx * tx[k] + wby * ty[k]
+                ev_b[nb] = wbx * nx[k] + wby * ny[k]
+                b_lo[nb], b_hi[nb] = _capsule_on_line(eu_a[nb], ev_a[nb], eu_b[nb],
+                                                      ev_b[nb], r)
                 nb += 1
+        g = 0  # the kept edges, in the same order
         for q in range(p0, p):  # the interiors
             nc = 0
-            for e in range(offsets[ob[q]], offsets[ob[q] + 1]):
-                e1 = e + 1 if e + 1 < offsets[ob[q] + 1] else offsets[ob[q]]
-                wax, way = vx[e] - cx[k], vy[e] - cy[k]
-                wbx, wby = vx[e1] - cx[k], vy[e1] - cy[k]
-                ua = wax * tx[k] + way * ty[k]
-                ub = wbx * tx[k] + wby * ty[k]
+            for _ in range(offsets[ob[q]], offsets[ob[q] + 1]):
+                ua, va, ub, vb = eu_a[g], ev_a[g], eu_b[g], ev_b[g]
+                g += 1
                 if (ua > 0) != (ub > 0):
-                    va = wax * nx[k] + way * ny[k]
-                    vb = wbx * nx[k] + wby * ny[k]
                     cross[nc] = va + (0.0 - ua) * (vb - va) / (ub - ua)
                     nc += 1
             cv = np.sort(cross[:nc])

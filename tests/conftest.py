@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import settings
 
@@ -35,3 +36,15 @@ GRID_TURNS = [("A1B1", "B1B0"), ("B0C0", "C0C1"), ("C0C1", "C1D1"), ("C2C1", "C2
 #: Routes through the grid's outer corners, where two edges meet at a sharp inner corner
 #: with no junction area to round it.
 GRID_CORNERS = [("C3D3", "B1A1"), ("A2A3", "D0D1")]
+
+
+def winding_line(rng: np.random.Generator, m: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A random winding line of ``m`` points (origins ``(m, 2)``, unit normals ``(m, 2)``)
+    and random centre offsets ``(m,)`` along the normals: a control polygon's sweep lines."""
+    heading = np.cumsum(rng.normal(0.0, 0.3, m))
+    step = rng.uniform(0.3, 3.0, m)
+    origin = np.column_stack((np.cumsum(step * np.cos(heading)),
+                              np.cumsum(step * np.sin(heading))))
+    normal = np.column_stack((-np.sin(heading), np.cos(heading)))
+    return origin, normal, rng.uniform(-1.0, 1.0, m)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import winding_line
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.linalg import solveh_banded
@@ -196,12 +197,7 @@ def test_min_bending_offsets_matches_banded_solver(seed: int, m: int, weight: fl
     winding lines, narrow and wide bands, fixed points, stopping the first loop early;
     without weight, three points make a system with a condition number near 1e9)."""
     rng = np.random.default_rng(seed)
-    heading = np.cumsum(rng.normal(0.0, 0.3, m))
-    step = rng.uniform(0.3, 3.0, m)
-    origin = np.column_stack((np.cumsum(step * np.cos(heading)),
-                              np.cumsum(step * np.sin(heading))))
-    normal = np.column_stack((-np.sin(heading), np.cos(heading)))
-    centre = rng.uniform(-1.0, 1.0, m)
+    origin, normal, centre = winding_line(rng, m)
     scale = rng.choice([0.05, 2.0])
     lo, hi = centre - rng.uniform(0.0, scale, m), centre + rng.uniform(0.0, scale, m)
     fixed = rng.random(m) < 0.1
@@ -211,35 +207,14 @@ def test_min_bending_offsets_matches_banded_solver(seed: int, m: int, weight: fl
                                rtol=0.0, atol=1e-9 if weight > 0 else 1e-6)
 
 
-def leg_splits_reference(length: float, before: float, after: float, cap: float,
-                         ratio: float) -> np.ndarray:
-    """Gradually growing pieces of a leg, in plain Python."""
-    cuts_a, cuts_b = [], []
-    pos, step = 0.0, min(max(ratio * before, 0.5), cap)
-    while pos + step < length / 2.0:
-        pos += step
-        cuts_a.append(pos)
-        step = min(step * ratio, cap)
-    pos, step = length, min(max(ratio * after, 0.5), cap)
-    while pos - step > length / 2.0:
-        pos -= step
-        cuts_b.append(pos)
-        step = min(step * ratio, cap)
-    lo = cuts_a[-1] if cuts_a else 0.0
-    hi = cuts_b[-1] if cuts_b else length
-    mid = int(np.ceil((hi - lo) / cap - 1e-9))
-    cuts = np.concatenate((cuts_a, lo + (hi - lo) * np.arange(1, mid) / max(mid, 1),
-                           cuts_b[::-1]))
-    return np.asarray(cuts, dtype=float) / length
-
-
 @settings(max_examples=40, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 12), smooth=st.booleans(),
        cap=st.sampled_from([1.0, 4.0, 10.0]))
 def test_leg_fractions_match_leg_by_leg(seed: int, n: int, smooth: bool, cap: float) -> None:
     """All legs' split fractions at once equal those computed leg by leg (short, long and
-    empty legs; uniform pieces, or pieces growing from the neighbours)."""
-    from splineplan.control_polygon import _leg_fractions
+    empty legs; uniform pieces, or pieces growing from the neighbours), and every leg's
+    pieces are at most ``cap`` long."""
+    from splineplan.control_polygon import _leg_fractions, _leg_splits
 
     rng = np.random.default_rng(seed)
     leg_len = rng.choice([0.0, 0.3, 2.0, 8.0, 40.0], n) * rng.uniform(0.5, 1.5, n)
@@ -249,8 +224,8 @@ def test_leg_fractions_match_leg_by_leg(seed: int, n: int, smooth: bool, cap: fl
         if empty[j]:
             continue
         if smooth:
-            f = leg_splits_reference(leg_len[j], leg_len[j - 1] if j > 0 else np.inf,
-                                     leg_len[j + 1] if j + 1 < n else np.inf, cap, 2.0)
+            f = _leg_splits.py_func(leg_len[j], leg_len[j - 1] if j > 0 else np.inf,
+                                    leg_len[j + 1] if j + 1 < n else np.inf, cap, 2.0)
         else:
             pieces = int(np.ceil(leg_len[j] / cap - 1e-9))
             f = np.arange(1, pieces) / max(pieces, 1)
@@ -260,6 +235,9 @@ def test_leg_fractions_match_leg_by_leg(seed: int, n: int, smooth: bool, cap: fl
     np.testing.assert_array_equal(f, np.concatenate(want_f) if want_f else np.empty(0))
     np.testing.assert_array_equal(leg, np.concatenate(want_leg) if want_leg else np.empty(0))
     assert np.all((f > 0.0) & (f < 1.0))
+    for j in np.flatnonzero(~empty):
+        pieces = np.diff(np.concatenate(([0.0], f[leg == j], [1.0]))) * leg_len[j]
+        assert np.all(pieces > 0) and np.all(pieces <= cap * (1 + 1e-9))
 
 
 @pytest.mark.parametrize("seed", [0, 3])

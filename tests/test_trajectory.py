@@ -6,6 +6,7 @@ import itertools
 
 import numpy as np
 import pytest
+from conftest import winding_line
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely import affinity
@@ -608,12 +609,7 @@ def test_min_bending_offsets_solves_its_least_squares_problem(seed: int, m: int,
     from splineplan.control_polygon import min_bending_offsets
 
     rng = np.random.default_rng(seed)
-    heading = np.cumsum(rng.normal(0.0, 0.3, m))
-    step = rng.uniform(0.3, 3.0, m)
-    origin = np.column_stack((np.cumsum(step * np.cos(heading)),
-                              np.cumsum(step * np.sin(heading))))
-    normal = np.column_stack((-np.sin(heading), np.cos(heading)))
-    centre = rng.uniform(-1.0, 1.0, m)
+    origin, normal, centre = winding_line(rng, m)
     lo, hi = centre - rng.uniform(0.0, 2.0, m), centre + rng.uniform(0.0, 2.0, m)
     fixed = rng.random(m) < 0.1
     lo[fixed] = hi[fixed] = centre[fixed]
