@@ -137,8 +137,11 @@ def _cmd_plan_image(args: argparse.Namespace) -> int:
         import numpy as np
 
         kappa = float(np.max(np.abs(tr.curvature)))
-        why = (f"min clearance {tr.min_clearance:.2f} m is below the margin "
-               f"{tr.safety_margin:.2f} m" if tr.min_clearance < tr.safety_margin else
+        obs, road = float(np.min(tr.clearance_obstacles)), float(np.min(tr.clearance_road))
+        why = (f"it comes within {obs:.2f} m of an obstacle (margin {tr.safety_margin:.2f} m)"
+               if obs < tr.safety_margin - 1e-6 else
+               f"its clearance to the road edge drops to {road:.2f} m (margin "
+               f"{tr.road_margin:.2f} m)" if road < tr.road_margin - 1e-6 else
                f"curvature up to {kappa:.3f} 1/m exceeds the limit {params.kappa_max:.3f} 1/m")
         print(f"splineplan plan-image: warning: the trajectory is not feasible: {why}",
               file=sys.stderr)

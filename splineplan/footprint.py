@@ -2,7 +2,8 @@
 
 Level 3 checks each sample of a curve: the vehicle's rectangle, centred on the curve and
 oriented along it, keeps the safety margin from every obstacle polygon (exact
-rectangle-polygon distance, culled by bounding box) and from the road edges (its corners
+rectangle-polygon distance, culled by bounding box) and the road margin from the road edges
+(by default none: it stays on the road; its corners
 and long-side midpoints in the frames of the corridor's reference segments, and the road
 edges' inward vertices, which can come between those points, by exact rectangle-point
 distance). A module of its own because both the repair of the first curve and the
@@ -50,7 +51,8 @@ class _Checker:
     corridor: Corridor
     half_length: float
     half_width: float
-    margin: float
+    margin: float  # from the obstacles
+    road_margin: float  # from the road edges
     vx: FloatArray  # (V,): x and y of the obstacles' vertices, polygon after polygon
     vy: FloatArray
     offsets: NDArray[np.int64]  # (K + 1,): polygon k's vertices are offsets[k]:offsets[k + 1]
@@ -100,7 +102,7 @@ class _Checker:
 
     @classmethod
     def build(cls, corridor: Corridor, obstacles: Obstacles, params: RoadmapParams,
-              near_xy: FloatArray) -> _Checker:
+              near_xy: FloatArray, road_margin: float) -> _Checker:
         reach = np.hypot(params.vehicle_length, params.vehicle_width) / 2.0
         radius = reach + params.safety_margin + CLEARANCE_HORIZON + 5.0
         # the obstacles whose bounding box comes within the radius of the points' extent
@@ -113,7 +115,7 @@ class _Checker:
         idx = np.repeat(obstacles.offsets[sel] - offsets[:-1], count) + np.arange(offsets[-1])
         verts = obstacles.vertices[idx]
         return cls(corridor, params.vehicle_length / 2.0, params.vehicle_width / 2.0,
-                   params.safety_margin, np.ascontiguousarray(verts[:, 0]),
+                   params.safety_margin, road_margin, np.ascontiguousarray(verts[:, 0]),
                    np.ascontiguousarray(verts[:, 1]), offsets, np.ascontiguousarray(b[sel]))
 
     def stations(self, xy: FloatArray) -> FloatArray:
@@ -142,12 +144,13 @@ class _Checker:
 
     def slack(self, xy: FloatArray, heading: FloatArray, sc: FloatArray | None = None
               ) -> tuple[FloatArray, FloatArray]:
-        """Footprint clearance [m] beyond the safety margin (negative: too close), and the
-        centres' stations [m] (see :meth:`road`)."""
+        """Footprint clearance [m] beyond the margins (negative: too close to an obstacle or
+        a road edge), and the centres' stations [m] (see :meth:`road`)."""
         if sc is None:
             sc = self.stations(xy)
         return kernels.footprint_slack(*_xyh(xy, heading), np.asarray(sc, dtype=float),
-                             *self._road_args(), *self.window, *self._obstacle_args())
+                             *self._road_args(), *self.window, *self._obstacle_args(),
+                             self.margin)
 
     def obstacles(self, xy: FloatArray, heading: FloatArray,
                   horizon: float = CLEARANCE_HORIZON, cull: bool = False) -> FloatArray:
@@ -160,9 +163,10 @@ class _Checker:
                                           float(horizon), bool(cull))
 
     def _road_args(self) -> tuple[Any, ...]:
-        reach = np.hypot(self.half_length, self.half_width) + self.margin + CORNER_BAND
+        rm = self.road_margin
+        reach = np.hypot(self.half_length, self.half_width) + rm + CORNER_BAND
         return (*self.frames, *self.body, *self.corners, self.half_length, self.half_width,
-                self.margin, self.margin + CORNER_BAND, reach)
+                rm, rm + CORNER_BAND, reach)
 
     def _obstacle_args(self) -> tuple[Any, ...]:
         return self.vx, self.vy, self.offsets, self.bbox

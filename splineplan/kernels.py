@@ -170,10 +170,10 @@ def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
                     cside: FloatArray, hl: float, hw: float, margin: float, band: float,
                     reach: float, lmin: FloatArray, rmax: FloatArray, turn: FloatArray,
                     seg_heading: FloatArray, vx: FloatArray, vy: FloatArray,
-                    offsets: NDArray[np.int64], bbox: FloatArray
+                    offsets: NDArray[np.int64], bbox: FloatArray, obs_margin: float
                     ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
-    """:meth:`splineplan.footprint._Checker.slack`: clearance beyond the margin [m] and
-    stations [m]."""
+    """:meth:`splineplan.footprint._Checker.slack`: clearance beyond the margins [m]
+    (``margin`` from the road edges, ``obs_margin`` from the obstacles) and stations [m]."""
     n = len(x)
     road = np.empty(n)
     station = np.empty(n)
@@ -201,8 +201,8 @@ def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
             r = min(tl, tr)
         road[j] = r
         station[j] = s_new
-    near = obstacle_clearance(x, y, h, vx, vy, offsets, bbox, hl, hw, margin, 0.0, True)
-    return np.minimum(near, road) - margin, station
+    near = obstacle_clearance(x, y, h, vx, vy, offsets, bbox, hl, hw, obs_margin, 0.0, True)
+    return np.minimum(near - obs_margin, road - margin), station
 
 
 @njit(cache=True)

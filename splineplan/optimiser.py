@@ -308,7 +308,7 @@ def _push(curve: _Curve, samples: tuple[FloatArray, ...], checker: _Checker,
 
     best = score(slack)
     bend_best = float(np.abs(curvature_from_derivatives(d1, d2)).max())
-    n, k, m = len(curve.ctrl), curve.k, checker.margin
+    n, k, m = len(curve.ctrl), curve.k, checker.road_margin
     kept = 0
     for _ in range(params.repair_rounds):
         bad = np.flatnonzero(slack < 0)
@@ -404,7 +404,7 @@ class _Optimiser:
             self.lo.astype(np.int64), self.hi.astype(np.int64),
             np.ascontiguousarray(self.cand, dtype=np.int64), self.movable, self.refused,
             self.k, p.kappa_smax, p.kappa_max, p.max_iterations, p.patience,
-            (*ch._road_args(), *ch.window, *ch._obstacle_args()))
+            (*ch._road_args(), *ch.window, *ch._obstacle_args(), ch.margin))
         tried, accepted, refused, rounds = (int(v) for v in out)
         log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)
         return tried, accepted, refused, rounds

@@ -180,11 +180,12 @@ def warm_up() -> None:
 
 
 def _infeasible_samples(tr: Trajectory, kappa_max: float) -> NDArray[np.bool_]:
-    """Per sample: curvature over ``kappa_max`` [1/m], or the footprint within the margin
-    (with level 3's tolerance for rounding)."""
+    """Per sample: curvature over ``kappa_max`` [1/m], or the footprint within the safety
+    margin of an obstacle or the road margin of a road edge (with level 3's tolerance for
+    rounding)."""
     return ((np.abs(tr.curvature) > kappa_max * (1.0 + 1e-6))
             | (tr.clearance_obstacles < tr.safety_margin - 1e-6)
-            | (tr.clearance_road < tr.safety_margin - 1e-6))
+            | (tr.clearance_road < tr.road_margin - 1e-6))
 
 
 def _fails_near_start(tr: Trajectory, reach: float, kappa_max: float) -> bool:
@@ -315,4 +316,4 @@ def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,
         cat["clearance_obstacles"], cat["clearance_road"],
         all(p.feasible for p in parts), stats,
         min(p.min_speed_before for p in parts), min(p.min_speed_after for p in parts),
-        parts[0].safety_margin)
+        parts[0].safety_margin, parts[0].road_margin)

@@ -5,8 +5,8 @@ B-spline are roadmap vertices, after the vehicle's position and a heading point 
 it along its heading. While some point of the curve allows less than ``s_max`` (equation 1),
 the control point nearest the slowest point moves to its neighbours' mean (equation 3); a
 move is kept only if the vehicle's footprint along the changed part of the curve stays on
-the road and clear of the obstacles by the safety margin, and the curvature stays within
-the turning limit.
+the road (``TrajectoryParams.road_margin`` inside its edges, by default none) and clear of
+the obstacles by the safety margin, and the curvature stays within the turning limit.
 
 Steps, and the choices beyond the paper:
 
@@ -39,7 +39,7 @@ Steps, and the choices beyond the paper:
    basis column * delta), so only the changed stretch is re-evaluated and re-checked.
 5. Feasibility: the footprint is the vehicle's rectangle centred on the curve and oriented
    along it; its distance to each nearby obstacle polygon is exact (culled by bounding
-   box); on the road its corners and long-side midpoints keep the margin from the road
+   box); on the road its corners and long-side midpoints keep the road margin from the road
    edges (the corridor is extended past its ends), and so do the edges' vertices that
    point into the road, which can meet the footprint's sides between those points.
    Curvature above ``1 / min_turn_radius`` is infeasible. A curve that starts infeasible
@@ -138,15 +138,17 @@ class Trajectory:
         ``safety_margin`` + :data:`splineplan.footprint.CLEARANCE_HORIZON`) and to the
         nearer road edge.
     feasible
-        Whether the footprint keeps the safety margin from obstacles and road edges at every
-        sample and the curvature stays within ``1 / min_turn_radius``.
+        Whether the footprint keeps the safety margin from the obstacles and the road margin
+        from the road edges at every sample, and the curvature stays within
+        ``1 / min_turn_radius``.
     iterations
         Moves tried, accepted and refused.
     min_speed_before, min_speed_after
         Lowest speed [m/s] that equation (1) allows on the curve before and after the
         optimisation.
-    safety_margin
-        Margin [m] the feasibility was checked with.
+    safety_margin, road_margin
+        Margins [m] from the obstacles and from the road edges that the feasibility was
+        checked with.
     """
 
     t: FloatArray
@@ -165,6 +167,7 @@ class Trajectory:
     min_speed_before: float = float("nan")
     min_speed_after: float = float("nan")
     safety_margin: float = 0.0
+    road_margin: float = 0.0
 
     @property
     def xy(self) -> FloatArray:
@@ -217,7 +220,7 @@ class Trajectory:
             tt, x, y, head, v, np.interp(tt, self.t, self.curvature), s, self.control_points,
             self.spline, np.interp(tt, self.t, self.clearance_obstacles),
             np.interp(tt, self.t, self.clearance_road), self.feasible, self.iterations,
-            self.min_speed_before, self.min_speed_after, self.safety_margin)
+            self.min_speed_before, self.min_speed_after, self.safety_margin, self.road_margin)
 
 
 # ---- planning --------------------------------------------------------------------------
@@ -290,7 +293,7 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     rp = roadmap.params
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
                                    smooth, frame=frame)
-    checker = _Checker.build(corridor, obstacles, rp, pool)
+    checker = _Checker.build(corridor, obstacles, rp, pool, params.road_margin)
     curve, refinements, doubled, samples = _refine(pool, counts, checker, params)
     opt = _Optimiser(curve, checker, params, samples)
     kappa_before = opt.kappa.copy()
@@ -306,7 +309,7 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
         traj["s"], final, spline, traj["clear_obs"], traj["clear_road"],
         bool(traj["feasible"]), stats, float(v_before.min()),
         float(allowed_speed(opt.kappa, mu=params.mu, g=params.g, s_max=params.s_max).min()),
-        rp.safety_margin)
+        rp.safety_margin, params.road_margin)
 
 
 def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
@@ -331,7 +334,7 @@ def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
     clear_obs = checker.obstacles(pos, head)
     clear_road, _ = checker.road(pos, head, np.interp(uu, curve.u, opt.station))
     feasible = (np.all(clear_obs >= rp.safety_margin - 1e-6)
-                and np.all(clear_road >= rp.safety_margin - 1e-6)
+                and np.all(clear_road >= params.road_margin - 1e-6)
                 and np.all(np.abs(kappa) <= params.kappa_max * (1 + 1e-6))
                 and np.all(opt.slack >= -1e-6)
                 and np.all(opt.kappa <= params.kappa_max * (1 + 1e-6)))

@@ -32,6 +32,12 @@ class TrajectoryParams:
         Acceleration and braking limits [m/s^2].
     sample_spacing
         Spacing [m] of the trajectory's samples along the curve.
+    road_margin
+        Clearance [m] the footprint keeps from the road edges. The paper and the issue ask
+        only that the vehicle stay on the road (0); level 2's roadmap already keeps
+        ``RoadmapParams.safety_margin`` from them where the road is wide enough, and the
+        curve may use the rest of a lane in a bend, as a driver does. Obstacles always keep
+        ``RoadmapParams.safety_margin``.
     min_turn_radius
         Smallest turning radius [m] of the path of the vehicle's centre (the middle of its
         rectangle): a hard limit on the curvature. A compact car with a 10.9 m turning
@@ -73,6 +79,7 @@ class TrajectoryParams:
     a_max: float = 2.0
     b_max: float = 4.0
     sample_spacing: float = 0.5
+    road_margin: float = 0.0
     min_turn_radius: float = 4.2
     max_iterations: int = 5000
     band_fraction: float = 0.8
@@ -95,7 +102,8 @@ class TrajectoryParams:
                 and 0.0 <= self.band_fraction <= 1.0):
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
-        for name in ("lead_in_lengths", "lead_in_time", "band_reserve", "detour_rate"):
+        for name in ("road_margin", "lead_in_lengths", "lead_in_time", "band_reserve",
+                     "detour_rate"):
             require_non_negative(f"TrajectoryParams.{name}", getattr(self, name))
         for name in ("max_iterations", "repair_rounds", "patience"):
             value = getattr(self, name)

@@ -56,7 +56,7 @@ def test_long_curved_corridor_is_continuous_and_feasible() -> None:
     base = box(-rp.vehicle_length / 2, -rp.vehicle_width / 2,
                rp.vehicle_length / 2, rp.vehicle_width / 2)
     grown = [Polygon(p).buffer(rp.safety_margin - 1e-6) for p in obs.polygons()]
-    road = Polygon(cor.polygon()).buffer(-(rp.safety_margin - 1e-6), join_style=2)
+    road = Polygon(cor.polygon()).buffer(-(tr.road_margin - 1e-6), join_style=2)
     st = cor.to_sl(tr.xy)[:, 0]
     inner = (st > 4.0) & (st < cor.length - 4.0)  # the footprint overhangs the road's ends
     for x, y, h, ok in zip(tr.x, tr.y, tr.heading, inner, strict=True):
@@ -68,8 +68,9 @@ def test_long_curved_corridor_is_continuous_and_feasible() -> None:
 
 def footprint_violations(tr: Trajectory, cor: Corridor, obs: Obstacles, rp: RoadmapParams,
                          end_room: float = 4.0) -> tuple[int, int]:
-    """Samples whose footprint (shapely) touches an obstacle grown by the margin, and samples
-    (``end_room`` [m] from the corridor's ends) whose footprint leaves the road shrunk by it."""
+    """Samples whose footprint (shapely) touches an obstacle grown by the safety margin, and
+    samples (``end_room`` [m] from the corridor's ends) whose footprint leaves the road shrunk
+    by the trajectory's road margin."""
     hl, hw = rp.vehicle_length / 2, rp.vehicle_width / 2
     c, s = np.cos(tr.heading)[:, None], np.sin(tr.heading)[:, None]
     u, v = np.array([-hl, hl, hl, -hl]), np.array([-hw, -hw, hw, hw])
@@ -77,7 +78,7 @@ def footprint_violations(tr: Trajectory, cor: Corridor, obs: Obstacles, rp: Road
     feet = shapely.polygons(rings)
     grown = shapely.union_all([Polygon(p).buffer(rp.safety_margin - 1e-6)
                                for p in obs.polygons()])
-    road = Polygon(cor.polygon()).buffer(-(rp.safety_margin - 1e-6), join_style=2)
+    road = Polygon(cor.polygon()).buffer(-(tr.road_margin - 1e-6), join_style=2)
     st = cor.to_sl(tr.xy)[:, 0]
     inner = (st > end_room) & (st < cor.length - end_room)
     return (int(shapely.intersects(feet, grown).sum()),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -82,12 +83,13 @@ def footprints(tr: Trajectory, rp: RoadmapParams) -> list[Polygon]:
 
 def shapely_violations(tr: Trajectory, corridor: Corridor, obstacles: Obstacles,
                        rp: RoadmapParams, tol: float = 1e-6) -> tuple[int, int]:
-    """Samples whose footprint touches a grown obstacle, and samples off the shrunk road."""
+    """Samples whose footprint touches an obstacle grown by the safety margin, and samples
+    off the road shrunk by the trajectory's road margin."""
     grown = [Polygon(p).buffer(rp.safety_margin - tol) for p in obstacles.polygons()]
     # straight roads along +x only; the planner extends the road past its ends
     ref = corridor.reference
     road = box(ref[0, 0] - 10.0, float(corridor.right.max()), ref[-1, 0] + 10.0,
-               float(corridor.left.min())).buffer(-(rp.safety_margin - tol), join_style=2)
+               float(corridor.left.min())).buffer(-(tr.road_margin - tol), join_style=2)
     hits = off = 0
     for fp in footprints(tr, rp):
         hits += any(fp.intersects(g) for g in grown)
@@ -223,7 +225,8 @@ def test_infeasible_start_is_reported_not_hidden() -> None:
                          TrajectoryParams(max_iterations=0), 0.0)
     assert not tr.feasible
     assert (np.abs(tr.curvature).max() > TP.kappa_max
-            or tr.min_clearance < RoadmapParams().safety_margin)
+            or tr.clearance_obstacles.min() < tr.safety_margin
+            or tr.clearance_road.min() < tr.road_margin)
 
 
 def kinked_lane(angle_deg: float, width: float = 3.2) -> tuple[Corridor, Polygon]:
@@ -255,35 +258,53 @@ def lane_clearance(tr: Trajectory, corridor: Corridor, lane: Polygon, rp: Roadma
 
 
 def test_curve_cutting_a_lane_corner_is_pushed_back_into_the_lane() -> None:
-    """A 42 degree corner of one 3.1 m lane: the first curve cuts it to 0.25 m of the edge;
-    the repair moves it sideways until the footprint keeps the margin (shapely), and
-    without repair the curve stays infeasible."""
+    """A 42 degree corner of one 3.1 m lane, with a road margin of 0.3 m: the first curve
+    cuts it to 0.25 m of the edge; the repair moves it sideways until the footprint keeps
+    the margin (shapely), and without repair the curve stays infeasible."""
     corridor, lane = kinked_lane(42.0, 3.1)
     rp = RoadmapParams()
+    tp = TrajectoryParams(road_margin=0.3)
     rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), rp)
-    raw = plan_trajectory(rm, corridor, Obstacles.empty(), TrajectoryParams(repair_rounds=0),
-                          0.0)
+    raw = plan_trajectory(rm, corridor, Obstacles.empty(), replace(tp, repair_rounds=0), 0.0)
     assert not raw.feasible
-    assert lane_clearance(raw, corridor, lane, rp) < rp.safety_margin - 0.03
-    tr = plan_trajectory(rm, corridor, Obstacles.empty(), None, 0.0)
+    assert lane_clearance(raw, corridor, lane, rp) < tp.road_margin - 0.03
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(), tp, 0.0)
     assert tr.feasible and tr.iterations.refinements >= 1
-    assert lane_clearance(tr, corridor, lane, rp) >= rp.safety_margin - 1e-6
+    assert lane_clearance(tr, corridor, lane, rp) >= tp.road_margin - 1e-6
+
+
+def test_road_margin_lets_a_bend_use_the_whole_lane() -> None:
+    """A 55 degree corner of one 3.2 m lane: kept 0.3 m from the lane's edges, the curve
+    comes closer in the corner; on the lane itself (the default road margin, none) it is
+    feasible and its footprint stays inside the lane by shapely (to within 0.05 m: the
+    corridor rounds the mitred corner off a little)."""
+    corridor, lane = kinked_lane(55.0, 3.2)
+    rp = RoadmapParams()
+    rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), rp)
+    strict = plan_trajectory(rm, corridor, Obstacles.empty(),
+                             TrajectoryParams(road_margin=0.3), 0.0)
+    assert not strict.feasible and strict.clearance_road.min() < 0.3
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(), None, 0.0)
+    assert tr.road_margin == 0.0 and tr.feasible
+    assert lane_clearance(tr, corridor, lane, rp) >= -0.05
+    assert np.abs(tr.curvature).max() <= TrajectoryParams().kappa_max * (1 + 1e-6)
 
 
 @settings(max_examples=15, deadline=None)
-@given(angle=st.floats(5.0, 45.0), left=st.booleans(), width=st.floats(3.0, 3.6),
-       start=st.floats(-0.3, 0.3))
+@given(angle=st.floats(5.0, 80.0), left=st.booleans(), width=st.floats(3.0, 3.6),
+       start=st.floats(-0.3, 0.3), road_margin=st.sampled_from([0.0, 0.15, 0.3]))
 def test_lane_corners_feasible_only_when_clear(angle: float, left: bool, width: float,
-                                              start: float) -> None:
-    """Random corners of one lane: a curve reported feasible keeps the margin from the
-    lane's edges by shapely, to within 0.05 m (the corridor holds the edges' offsets every
-    0.5 m of its smoothed reference, which rounds a mitred corner off a little)."""
+                                              start: float, road_margin: float) -> None:
+    """Random corners of one lane: a curve reported feasible keeps the road margin from
+    the lane's edges by shapely, to within 0.05 m (the corridor holds the edges' offsets
+    every 0.5 m of its smoothed reference, which rounds a mitred corner off a little)."""
     corridor, lane = kinked_lane(angle if left else -angle, width)
     rp = RoadmapParams()
     rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, start]), rp)
-    tr = plan_trajectory(rm, corridor, Obstacles.empty(), None, 0.0)
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(),
+                         TrajectoryParams(road_margin=road_margin), 0.0)
     if tr.feasible:
-        assert lane_clearance(tr, corridor, lane, rp) >= rp.safety_margin - 0.05
+        assert lane_clearance(tr, corridor, lane, rp) >= road_margin - 0.05
 
 
 @settings(max_examples=30, deadline=None)
@@ -299,7 +320,7 @@ def test_footprint_side_clearances_match_shapely(poses: list[tuple[float, float,
     rp = RoadmapParams()
     xy = np.array([(x, y) for x, y, _ in poses])
     heading = np.array([h for _, _, h in poses])
-    checker = _Checker.build(road, Obstacles.empty(), rp, xy)
+    checker = _Checker.build(road, Obstacles.empty(), rp, xy, 0.0)
     cl, cr = checker.road(xy, heading, None, sides=True)
     clear, _ = checker.road(xy, heading)
     np.testing.assert_array_equal(np.minimum(cl, cr), clear)
@@ -443,7 +464,7 @@ def test_footprint_obstacle_distance_matches_shapely(poses: list[tuple[float, fl
     rp = RoadmapParams()
     xy = np.array([(x, y) for x, y, _ in poses])
     heading = np.array([h for _, _, h in poses])
-    checker = _Checker.build(straight_road(40.0), obstacles, rp, xy)
+    checker = _Checker.build(straight_road(40.0), obstacles, rp, xy, 0.0)
     got = checker.obstacles(xy, heading, horizon=50.0)
     hl, hw = rp.vehicle_length / 2.0, rp.vehicle_width / 2.0
     shapes = [Polygon(p) for p in polys]
@@ -459,7 +480,7 @@ def shapely_check_corridor(tr: Trajectory, corridor: Corridor, obstacles: Obstac
     """Footprints touching obstacles grown by the margin, and off the road shrunk by it
     (away from the road's ends, where the footprint overhangs)."""
     grown = [Polygon(p).buffer(rp.safety_margin - tol) for p in obstacles.polygons()]
-    road = Polygon(corridor.polygon()).buffer(-(rp.safety_margin - tol), join_style=2)
+    road = Polygon(corridor.polygon()).buffer(-(tr.road_margin - tol), join_style=2)
     st = corridor.to_sl(tr.xy)[:, 0]
     inner = (st > rp.vehicle_length) & (st < corridor.length - rp.vehicle_length)
     hits = off = 0
