@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from splineplan.corridor import UNBOUNDED, Corridor
@@ -170,6 +171,11 @@ class RoadNetwork:
         Every connection between normal edges.
     internal_lanes
         Internal (junction) lanes by id.
+    to_nodes
+        Per edge, the id of the junction it ends at.
+    junction_shapes
+        Junction outlines ``(k, 2)`` [m] by junction id (those SUMO draws, with three
+        points or more).
     bounds
         ``(xmin, ymin, xmax, ymax)`` [m] of the lane shapes.
     """
@@ -185,6 +191,8 @@ class RoadNetwork:
     _index: dict[str, int] = field(repr=False)
     _conn_from: IntArray = field(repr=False)
     _conn_to: IntArray = field(repr=False)
+    to_nodes: tuple[str, ...] = ()
+    junction_shapes: dict[str, FloatArray] = field(default_factory=dict)
     _graphs: dict[str, ClassGraph] = field(default_factory=dict, repr=False)
     #: bands of route corridors by the lanes they span (see :func:`route_corridor`)
     _bands: dict[tuple[str, ...], Any] = field(default_factory=dict, repr=False)
@@ -324,6 +332,13 @@ def _from_sumolib(path: Path, net: Any) -> RoadNetwork:
                   for e in normal)
     lengths = np.array([e.getLength() for e in normal], dtype=float)
     speeds = np.array([e.getSpeed() for e in normal], dtype=float)
+    to_nodes = tuple(e.getToNode().getID() for e in normal)
+    junctions: dict[str, FloatArray] = {}
+    for node in net.getNodes():
+        outline = np.asarray([pt[:2] for pt in node.getShape()], dtype=float).reshape(-1, 2)
+        if len(outline) >= 3:
+            outline.setflags(write=False)
+            junctions[node.getID()] = outline
 
     # the internal lane that follows each internal lane (internal junctions split a link)
     next_via: dict[str, str] = {}
@@ -364,7 +379,8 @@ def _from_sumolib(path: Path, net: Any) -> RoadNetwork:
         path=path, edge_ids=edge_ids, lengths=lengths, speeds=speeds, lanes=lanes,
         connections=tuple(conns), internal_lanes=internal,
         bounds=(float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])),
-        _index=index, _conn_from=conn_from, _conn_to=conn_to)
+        to_nodes=to_nodes, junction_shapes=junctions, _index=index, _conn_from=conn_from,
+        _conn_to=conn_to)
 
 
 def _build_graph(net: RoadNetwork, vclass: str) -> ClassGraph:
@@ -418,7 +434,10 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     of the next route edge, each side a kerb curve rounded as SUMO rounds a junction's
     corners (:func:`_junction_band`), so that a turn has the room of both roads and not
     only of one internal lane; where the turn is too sharp for that, it spans the internal
-    lanes of the allowed connections, from the rightmost to the leftmost. Over the last
+    lanes of the allowed connections, from the rightmost to the leftmost. Either is then
+    cut to the junction's paving (SUMO's outline, the lanes beside it and its internal
+    lanes) and holds at least the internal lanes of the route's connections
+    (:func:`_clip_to_paved`). Over the last
     :data:`APPROACH_LENGTH` metres of each edge but the first, the keep offsets hold the
     vehicle's centre to the lanes that connect to the next route edge (SUMO maps a vehicle
     into the junction, and its signals and right of way hold, only from those). The
@@ -487,13 +506,6 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     windows = _piece_windows(probe, pieces)
     left_off, right_off = _union_offsets(probe, pieces, windows)
     left_off, right_off = _limit_to_curvature(probe, left_off, right_off)
-    keep_left = keep_right = None
-    if keep:
-        keep_left, keep_right = _union_offsets(probe, keep,
-                                               [windows[starts[i]] for i in keep_edge],
-                                               fill=False)
-        keep_left = np.minimum(keep_left, left_off)
-        keep_right = np.maximum(keep_right, right_off)
     own = [windows[k] for k in starts]
     starts_s = _project_each(probe, np.array([pieces[k][0][0] for k in starts]), own)
     starts_s[0] = 0.0
@@ -501,8 +513,204 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     # each edge's own stretch ends where its band's midline ends (a junction follows)
     ends_s = _project_each(probe, np.array([pieces[k][0][-1] for k in starts]), own)
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
+    # each junction's stretch within the paving of it and of the junctions beside it (a
+    # short edge between two junctions lies in both stretches)
+    pavings = [_junction_paving(network, edges[i], edges[i + 1], cls)
+               for i in range(len(edges) - 1)]
+    for i in range(len(pavings)):
+        _clip_to_paved(probe, left_off, right_off, ends_s[i], starts_s[i + 1],
+                       _joined(pavings[max(i - 1, 0):i + 2]),
+                       _junction_paving(network, edges[i], edges[i + 1], cls, via=True))
+    keep_left = keep_right = None
+    if keep:
+        keep_left, keep_right = _union_offsets(probe, keep,
+                                               [windows[starts[i]] for i in keep_edge],
+                                               fill=False)
+        keep_left = np.minimum(keep_left, left_off)
+        keep_right = np.maximum(keep_right, right_off)
     return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
                     keep_left, keep_right, ends_s)
+
+
+#: Length [m] of the lanes before and after a junction that count as its paving (see
+#: :func:`_junction_paving`), and the stations [m] beyond the junction's own stretch over
+#: which the corridor is clipped to it.
+PAVING_REACH = 12.0
+PAVING_PAD = 3.0
+#: Gaps [m] between paved pieces along a corridor's normal that count as paved (lanes
+#: drawn a few centimetres apart).
+PAVING_GAP = 0.3
+#: Length [m] by which a lane's ends reach into the junctions (see :func:`_lane_quads`).
+PAVING_CAP = 0.5
+
+
+def _junction_paving(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
+                     via: bool = False) -> tuple[FloatArray, FloatArray, IntArray]:
+    """The paving of the junction between two route edges, as polygons: x ``(v,)``, y
+    ``(v,)`` [m] of their vertices, polygon after polygon, and where each starts ``(k + 1,)``.
+
+    They are SUMO's outline of the junction, the internal lanes of the allowed connections
+    between the two edges, and the last and first :data:`PAVING_REACH` metres of the two
+    edges' allowed lanes, each lane as one quadrilateral per segment of its centre line
+    (extended to the mitre at each bend); with ``via``, the internal lanes only. Once per
+    network and edge pair (read-only).
+    """
+    key = ("paving", from_edge, to_edge, vclass, str(via))
+    if key not in network._bands:
+        polys: list[FloatArray] = []
+        outline = network.junction_shapes.get(network.to_nodes[network.edge_index(from_edge)])
+        if outline is not None and not via:
+            polys.append(outline)
+        for ln in () if via else network.lanes_of(from_edge):
+            if ln.allows(vclass):
+                polys += _lane_quads(_tail(ln.shape, PAVING_REACH), ln.width)
+        for ln in () if via else network.lanes_of(to_edge):
+            if ln.allows(vclass):
+                polys += _lane_quads(_tail(ln.shape[::-1], PAVING_REACH)[::-1], ln.width)
+        for c in network.connections_between(from_edge, to_edge, vclass=vclass):
+            for v in c.via:
+                lane = network.internal_lanes[v]
+                polys += _lane_quads(lane.shape, lane.width)
+        polys = [p for p in polys if len(p) >= 3]
+        offsets = np.concatenate(([0], np.cumsum([len(p) for p in polys]))).astype(np.int64)
+        pts = np.concatenate(polys) if polys else np.zeros((0, 2))
+        paving = (np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), offsets)
+        for a in paving:
+            a.setflags(write=False)
+        network._bands[key] = paving
+    found: tuple[FloatArray, FloatArray, IntArray] = network._bands[key]
+    return found
+
+
+def _joined(pavings: list[tuple[FloatArray, FloatArray, IntArray]]
+            ) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Several pavings (see :func:`_junction_paving`) as one."""
+    if len(pavings) == 1:
+        return pavings[0]
+    starts = np.cumsum([0] + [len(p[0]) for p in pavings[:-1]])
+    offsets = np.concatenate([[0]] + [p[2][1:] + a for p, a in zip(pavings, starts, strict=True)])
+    return (np.concatenate([p[0] for p in pavings]), np.concatenate([p[1] for p in pavings]),
+            offsets.astype(np.int64))
+
+
+def _tail(shape: FloatArray, length: float) -> FloatArray:
+    """The last ``length`` [m] of a polyline."""
+    pts = dedupe_polyline(shape)
+    if len(pts) < 2:
+        return pts
+    s = polyline_stations(pts)
+    if s[-1] <= length:
+        return pts
+    return _cut_polyline(pts, 1.0 - length / s[-1], 1.0)
+
+
+def _lane_quads(centre: FloatArray, width: float) -> list[FloatArray]:
+    """A lane as quadrilaterals ``(4, 2)``, one per segment of its centre line, each
+    extended along it to the mitre of the bend at its ends (at most half the width), and
+    the lane's ends by :data:`PAVING_CAP` (SUMO's junction outlines and the lanes' ends
+    meet at slightly different angles: the sliver between them is paved)."""
+    pts = dedupe_polyline(centre)
+    if len(pts) < 2:
+        return []
+    d = np.diff(pts, axis=0)
+    d /= np.hypot(*d.T)[:, None]
+    # the extension at each inner vertex: half the width times tan(turn / 2)
+    cos_t = np.clip(np.einsum("ij,ij->i", d[:-1], d[1:]), -1.0, 1.0)
+    ext = np.minimum(width / 2.0 * np.tan(np.arccos(cos_t) / 2.0), width / 2.0)
+    back = np.concatenate(([PAVING_CAP], ext))
+    ahead = np.concatenate((ext, [PAVING_CAP]))
+    a = pts[:-1] - back[:, None] * d
+    b = pts[1:] + ahead[:, None] * d
+    n = width / 2.0 * np.column_stack((-d[:, 1], d[:, 0]))
+    return [np.array([a[k] - n[k], b[k] - n[k], b[k] + n[k], a[k] + n[k]])
+            for k in range(len(d))]
+
+
+def _clip_to_paved(probe: Corridor, left: FloatArray, right: FloatArray, s0: float,
+                   s1: float, paving: tuple[FloatArray, FloatArray, IntArray],
+                   lanes: tuple[FloatArray, FloatArray, IntArray]) -> None:
+    """Offsets ``left``, ``right`` (in place) between stations ``s0`` and ``s1`` [m] (and
+    :data:`PAVING_PAD` beyond) cut to the paved stretch of the normal that holds the
+    corridor's middle, where one does (the rounded kerbs of a junction band can reach
+    beyond SUMO's junction outline), and widened to the stretch of the junction's
+    ``lanes`` (its internal lanes, which SUMO's vehicles drive) that holds it."""
+    px, py, offsets = paving
+    if len(offsets) < 2:
+        return
+    i0 = int(np.searchsorted(probe.s, s0 - PAVING_PAD, side="left"))
+    i1 = int(np.searchsorted(probe.s, s1 + PAVING_PAD, side="right"))
+    if i1 <= i0:
+        return
+    st = probe.s[i0:i1]
+    centre = probe.to_xy(st, np.zeros_like(st))
+    h = probe.heading_at(st)
+    mid = (left[i0:i1] + right[i0:i1]) / 2.0
+    lo, hi = _paved_spans(np.ascontiguousarray(centre[:, 0]),
+                          np.ascontiguousarray(centre[:, 1]), np.cos(h), np.sin(h), mid,
+                          px, py, offsets, PAVING_GAP)
+    ok = np.isfinite(lo)
+    lft = np.where(ok, np.minimum(left[i0:i1], hi), left[i0:i1])
+    rgt = np.where(ok, np.maximum(right[i0:i1], lo), right[i0:i1])
+    if len(lanes[2]) > 1:
+        lo, hi = _paved_spans(np.ascontiguousarray(centre[:, 0]),
+                              np.ascontiguousarray(centre[:, 1]), np.cos(h), np.sin(h), mid,
+                              *lanes, PAVING_GAP)
+        ok = np.isfinite(lo)
+        lft = np.where(ok, np.maximum(lft, hi), lft)
+        rgt = np.where(ok, np.minimum(rgt, lo), rgt)
+    left[i0:i1], right[i0:i1] = lft, rgt
+
+
+@njit(cache=True)
+def _paved_spans(cx: FloatArray, cy: FloatArray, tx: FloatArray, ty: FloatArray,
+                 mid: FloatArray, px: FloatArray, py: FloatArray, offsets: IntArray,
+                 gap: float) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """Per station (the point ``(cx, cy)``, the road's direction ``(tx, ty)``): the lateral
+    offsets [m] of the union of the polygons along the normal (their parts closer than
+    ``gap`` joined) that holds offset ``mid``; NaN where none does. Each polygon's part is
+    found by the even-odd rule from its edges' crossings of the normal."""
+    m = len(cx)
+    lo = np.full(m, np.nan)
+    hi = np.full(m, np.nan)
+    n_poly = len(offsets) - 1
+    most = 0
+    for k in range(n_poly):
+        most = max(most, offsets[k + 1] - offsets[k])
+    cross = np.empty(most + 1)
+    a_s = np.empty(n_poly * (most // 2 + 1))
+    b_s = np.empty(n_poly * (most // 2 + 1))
+    for j in range(m):
+        cnt = 0
+        for k in range(n_poly):
+            v0, v1 = offsets[k], offsets[k + 1]
+            nc = 0
+            for v in range(v0, v1):
+                w = v + 1 if v + 1 < v1 else v0
+                ua = (px[v] - cx[j]) * tx[j] + (py[v] - cy[j]) * ty[j]
+                ub = (px[w] - cx[j]) * tx[j] + (py[w] - cy[j]) * ty[j]
+                if (ua > 0.0) != (ub > 0.0):
+                    la = (py[v] - cy[j]) * tx[j] - (px[v] - cx[j]) * ty[j]
+                    lb = (py[w] - cy[j]) * tx[j] - (px[w] - cx[j]) * ty[j]
+                    cross[nc] = la + (lb - la) * ua / (ua - ub)
+                    nc += 1
+            c = np.sort(cross[:nc])
+            for q in range(0, nc - 1, 2):
+                a_s[cnt], b_s[cnt] = c[q], c[q + 1]
+                cnt += 1
+        if cnt == 0:
+            continue
+        order = np.argsort(a_s[:cnt])
+        ca, cb = a_s[order[0]], b_s[order[0]]
+        for q in range(1, cnt + 1):
+            if q < cnt and a_s[order[q]] <= cb + gap:
+                cb = max(cb, b_s[order[q]])
+                continue
+            if ca - 1e-9 <= mid[j] <= cb + 1e-9:
+                lo[j], hi[j] = ca, cb
+                break
+            if q < cnt:
+                ca, cb = a_s[order[q]], b_s[order[q]]
+    return lo, hi
 
 
 def _frozen(band: tuple[FloatArray, FloatArray, FloatArray] | None
