@@ -28,6 +28,7 @@ of least time. A route of one edge has the length ``length(e0) - start_pos``.
 
 from __future__ import annotations
 
+import itertools
 import logging
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -515,11 +516,9 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     # each junction's stretch within the paving of it and of the junctions beside it (a
     # short edge between two junctions lies in both stretches)
-    pavings = [_junction_paving(network, edges[i], edges[i + 1], cls)
-               for i in range(len(edges) - 1)]
-    for i in range(len(pavings)):
+    for i in range(len(edges) - 1):
         _clip_to_paved(probe, left_off, right_off, ends_s[i], starts_s[i + 1],
-                       _joined(pavings[max(i - 1, 0):i + 2]),
+                       _joined(network, edges[max(i - 1, 0):i + 3], cls),
                        _junction_paving(network, edges[i], edges[i + 1], cls, via=True))
     keep_left = keep_right = None
     if keep:
@@ -542,6 +541,8 @@ PAVING_PAD = 3.0
 PAVING_GAP = 0.3
 #: Length [m] by which a lane's ends reach into the junctions (see :func:`_lane_quads`).
 PAVING_CAP = 0.5
+#: Distance [m] from the reference line within which the paving is searched.
+PAVING_RANGE = 30.0
 
 
 def _junction_paving(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
@@ -582,15 +583,24 @@ def _junction_paving(network: RoadNetwork, from_edge: str, to_edge: str, vclass:
     return found
 
 
-def _joined(pavings: list[tuple[FloatArray, FloatArray, IntArray]]
+def _joined(network: RoadNetwork, edges: tuple[str, ...], vclass: str
             ) -> tuple[FloatArray, FloatArray, IntArray]:
-    """Several pavings (see :func:`_junction_paving`) as one."""
-    if len(pavings) == 1:
-        return pavings[0]
-    starts = np.cumsum([0] + [len(p[0]) for p in pavings[:-1]])
-    offsets = np.concatenate([[0]] + [p[2][1:] + a for p, a in zip(pavings, starts, strict=True)])
-    return (np.concatenate([p[0] for p in pavings]), np.concatenate([p[1] for p in pavings]),
-            offsets.astype(np.int64))
+    """The pavings (see :func:`_junction_paving`) of the junctions between consecutive
+    ``edges`` as one, once per network and edges (read-only)."""
+    key = ("paving", *edges, vclass)
+    if key not in network._bands:
+        pavings = [_junction_paving(network, a, b, vclass)
+                   for a, b in itertools.pairwise(edges)]
+        starts = np.cumsum([0] + [len(p[0]) for p in pavings[:-1]])
+        offsets = np.concatenate([[0]] + [p[2][1:] + a
+                                          for p, a in zip(pavings, starts, strict=True)])
+        joined = (np.concatenate([p[0] for p in pavings]),
+                  np.concatenate([p[1] for p in pavings]), offsets.astype(np.int64))
+        for arr in joined:
+            arr.setflags(write=False)
+        network._bands[key] = joined
+    found: tuple[FloatArray, FloatArray, IntArray] = network._bands[key]
+    return found
 
 
 def _tail(shape: FloatArray, length: float) -> FloatArray:
@@ -641,20 +651,18 @@ def _clip_to_paved(probe: Corridor, left: FloatArray, right: FloatArray, s0: flo
     i1 = int(np.searchsorted(probe.s, s1 + PAVING_PAD, side="right"))
     if i1 <= i0:
         return
-    st = probe.s[i0:i1]
-    centre = probe.to_xy(st, np.zeros_like(st))
-    h = probe.heading_at(st)
+    # the reference's points and the headings of the segments from them
+    cx = np.ascontiguousarray(probe.reference[i0:i1, 0])
+    cy = np.ascontiguousarray(probe.reference[i0:i1, 1])
+    h = probe._heading[np.minimum(np.arange(i0, i1), len(probe._heading) - 1)]
+    tx, ty = np.cos(h), np.sin(h)
     mid = (left[i0:i1] + right[i0:i1]) / 2.0
-    lo, hi = _paved_spans(np.ascontiguousarray(centre[:, 0]),
-                          np.ascontiguousarray(centre[:, 1]), np.cos(h), np.sin(h), mid,
-                          px, py, offsets, PAVING_GAP)
+    lo, hi = _paved_spans(cx, cy, tx, ty, mid, px, py, offsets, PAVING_GAP)
     ok = np.isfinite(lo)
     lft = np.where(ok, np.minimum(left[i0:i1], hi), left[i0:i1])
     rgt = np.where(ok, np.maximum(right[i0:i1], lo), right[i0:i1])
     if len(lanes[2]) > 1:
-        lo, hi = _paved_spans(np.ascontiguousarray(centre[:, 0]),
-                              np.ascontiguousarray(centre[:, 1]), np.cos(h), np.sin(h), mid,
-                              *lanes, PAVING_GAP)
+        lo, hi = _paved_spans(cx, cy, tx, ty, mid, *lanes, PAVING_GAP)
         ok = np.isfinite(lo)
         lft = np.where(ok, np.maximum(lft, hi), lft)
         rgt = np.where(ok, np.minimum(rgt, lo), rgt)
@@ -668,20 +676,32 @@ def _paved_spans(cx: FloatArray, cy: FloatArray, tx: FloatArray, ty: FloatArray,
     """Per station (the point ``(cx, cy)``, the road's direction ``(tx, ty)``): the lateral
     offsets [m] of the union of the polygons along the normal (their parts closer than
     ``gap`` joined) that holds offset ``mid``; NaN where none does. Each polygon's part is
-    found by the even-odd rule from its edges' crossings of the normal."""
+    found by the even-odd rule from its edges' crossings of the normal, within
+    :data:`PAVING_RANGE` of the station (polygons whose bounding box is farther are
+    skipped)."""
     m = len(cx)
     lo = np.full(m, np.nan)
     hi = np.full(m, np.nan)
     n_poly = len(offsets) - 1
     most = 0
+    box = np.empty((n_poly, 4))
     for k in range(n_poly):
         most = max(most, offsets[k + 1] - offsets[k])
+        v0, v1 = offsets[k], offsets[k + 1]
+        box[k, 0], box[k, 1] = px[v0:v1].min(), py[v0:v1].min()
+        box[k, 2], box[k, 3] = px[v0:v1].max(), py[v0:v1].max()
     cross = np.empty(most + 1)
     a_s = np.empty(n_poly * (most // 2 + 1))
     b_s = np.empty(n_poly * (most // 2 + 1))
+    reach = PAVING_RANGE
     for j in range(m):
         cnt = 0
+        # the normal's stretch within reach: its bounding box
+        ex, ey = abs(ty[j]) * reach, abs(tx[j]) * reach
         for k in range(n_poly):
+            if (box[k, 0] > cx[j] + ex or box[k, 2] < cx[j] - ex
+                    or box[k, 1] > cy[j] + ey or box[k, 3] < cy[j] - ey):
+                continue
             v0, v1 = offsets[k], offsets[k + 1]
             nc = 0
             for v in range(v0, v1):
@@ -691,11 +711,15 @@ def _paved_spans(cx: FloatArray, cy: FloatArray, tx: FloatArray, ty: FloatArray,
                 if (ua > 0.0) != (ub > 0.0):
                     la = (py[v] - cy[j]) * tx[j] - (px[v] - cx[j]) * ty[j]
                     lb = (py[w] - cy[j]) * tx[j] - (px[w] - cx[j]) * ty[j]
-                    cross[nc] = la + (lb - la) * ua / (ua - ub)
+                    x = la + (lb - la) * ua / (ua - ub)
+                    q = nc  # insertion sort: a few crossings per polygon
+                    while q > 0 and cross[q - 1] > x:
+                        cross[q] = cross[q - 1]
+                        q -= 1
+                    cross[q] = x
                     nc += 1
-            c = np.sort(cross[:nc])
             for q in range(0, nc - 1, 2):
-                a_s[cnt], b_s[cnt] = c[q], c[q + 1]
+                a_s[cnt], b_s[cnt] = cross[q], cross[q + 1]
                 cnt += 1
         if cnt == 0:
             continue
