@@ -79,6 +79,8 @@ class Corridor:
     _ref_x: FloatArray = field(init=False, repr=False)
     _ref_y: FloatArray = field(init=False, repr=False)
     _s: FloatArray = field(init=False, repr=False)
+    #: what other modules derive from the corridor alone, kept with it (read-only)
+    _memo: dict[Any, Any] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if len(self.reference) < 2 or self.s[-1] <= 0:
@@ -112,6 +114,7 @@ class Corridor:
         area = float(np.ptp(self._ref_x) * np.ptp(self._ref_y))
         cell = max(GRID_CELL, float(np.sqrt(area / (4.0 * len(self.reference)))))
         object.__setattr__(self, "_grid", (cell, *_grid_build(self._ref_x, self._ref_y, cell)))
+        object.__setattr__(self, "_memo", {})
 
     # -- construction -------------------------------------------------------------------
     @classmethod

@@ -67,38 +67,13 @@ class _Checker:
         pts = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw], [0.0, -hw], [0.0, hw],
                         [0.0, 0.0]])
         object.__setattr__(self, "body", np.ascontiguousarray(pts.T))
-        cor = self.corridor
-        # writable copies: the compiled kernels take one array type
-        st = np.array(cor.s, dtype=float)
-        h = cor.heading_at(st[:-1])
-        ref = np.asarray(cor.reference, dtype=float)
-        left, right = np.array(cor.left, dtype=float), np.array(cor.right, dtype=float)
-        object.__setattr__(self, "frames", (
-            st, ref[:-1, 0].copy(), ref[:-1, 1].copy(), np.cos(h), np.sin(h), left, right))
-        # per segment, over the stations the footprint can reach from it: the narrowest
-        # boundaries and the largest turn of the reference line (for a quick clear test),
-        # and the segment's own heading [rad]
-        ds = np.diff(st)
-        w = int(np.ceil((np.hypot(hl, hw) + 1.0) / max(float(np.quantile(ds, 0.1)), 1e-3)))
-        size = min(2 * w + 1, 2 * len(ds) + 1)
-        lmin = minimum_filter1d(left, size, mode="nearest")[:-1]
-        rmax = maximum_filter1d(right, size, mode="nearest")[:-1]
-        hh = np.unwrap(h)
-        turn = (maximum_filter1d(hh, size, mode="nearest")
-                - minimum_filter1d(hh, size, mode="nearest"))
-        seg_heading = np.arctan2(self.frames[4], self.frames[3])
-        object.__setattr__(self, "window", (lmin, rmax, turn, seg_heading))
-        # the road edges' vertices that point into the road (where an edge turns towards
-        # it): the footprint's sides can meet them between the probe points
-        found = []
-        for side, line in ((1.0, cor.left_xy()), (-1.0, cor.right_xy())):
-            d = np.diff(line, axis=0)
-            turn_in = side * (d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]) > 1e-12
-            j = np.flatnonzero(turn_in) + 1
-            found.append((st[j], line[j, 0], line[j, 1], np.full(len(j), side)))
-        cat = [np.concatenate(a) for a in zip(*found, strict=True)]
-        order = np.argsort(cat[0], kind="stable")
-        object.__setattr__(self, "corners", tuple(a[order] for a in cat))
+        key = ("footprint", hl, hw)
+        if key not in self.corridor._memo:  # the road's part, once per corridor and size
+            self.corridor._memo[key] = _road_frames(self.corridor, hl, hw)
+        frames, window, corners = self.corridor._memo[key]
+        object.__setattr__(self, "frames", frames)
+        object.__setattr__(self, "window", window)
+        object.__setattr__(self, "corners", corners)
 
     @classmethod
     def build(cls, corridor: Corridor, obstacles: Obstacles, params: RoadmapParams,
@@ -170,6 +145,43 @@ class _Checker:
 
     def _obstacle_args(self) -> tuple[Any, ...]:
         return self.vx, self.vy, self.offsets, self.bbox
+
+
+def _road_frames(cor: Corridor, hl: float, hw: float
+                 ) -> tuple[tuple[FloatArray, ...], ...]:
+    """The road's part of :class:`_Checker` for a vehicle of half length ``hl`` and half
+    width ``hw`` [m]: the reference segments' frames, their windows and the road edges'
+    inward vertices."""
+    # writable copies: the compiled kernels take one array type
+    st = np.array(cor.s, dtype=float)
+    h = cor.heading_at(st[:-1])
+    ref = np.asarray(cor.reference, dtype=float)
+    left, right = np.array(cor.left, dtype=float), np.array(cor.right, dtype=float)
+    frames = (st, ref[:-1, 0].copy(), ref[:-1, 1].copy(), np.cos(h), np.sin(h), left, right)
+    # per segment, over the stations the footprint can reach from it: the narrowest
+    # boundaries and the largest turn of the reference line (for a quick clear test),
+    # and the segment's own heading [rad]
+    ds = np.diff(st)
+    w = int(np.ceil((np.hypot(hl, hw) + 1.0) / max(float(np.quantile(ds, 0.1)), 1e-3)))
+    size = min(2 * w + 1, 2 * len(ds) + 1)
+    lmin = minimum_filter1d(left, size, mode="nearest")[:-1]
+    rmax = maximum_filter1d(right, size, mode="nearest")[:-1]
+    hh = np.unwrap(h)
+    turn = (maximum_filter1d(hh, size, mode="nearest")
+            - minimum_filter1d(hh, size, mode="nearest"))
+    seg_heading = np.arctan2(frames[4], frames[3])
+    window = (lmin, rmax, turn, seg_heading)
+    # the road edges' vertices that point into the road (where an edge turns towards
+    # it): the footprint's sides can meet them between the probe points
+    found = []
+    for side, line in ((1.0, cor.left_xy()), (-1.0, cor.right_xy())):
+        d = np.diff(line, axis=0)
+        turn_in = side * (d[:-1, 0] * d[1:, 1] - d[:-1, 1] * d[1:, 0]) > 1e-12
+        j = np.flatnonzero(turn_in) + 1
+        found.append((st[j], line[j, 0], line[j, 1], np.full(len(j), side)))
+    cat = [np.concatenate(a) for a in zip(*found, strict=True)]
+    order = np.argsort(cat[0], kind="stable")
+    return frames, window, tuple(a[order] for a in cat)
 
 
 def _xyh(xy: FloatArray, heading: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:

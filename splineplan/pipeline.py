@@ -9,7 +9,10 @@ end, or where a U-turn is shorter than going round a block). A corridor cannot f
 on itself, and levels 2 and 3 plan forward motion only, so the pipeline asks level 1 for
 the shortest route without turnaround connections (SUMO direction ``t``) and falls back to
 the shortest route only when every route needs one. :attr:`Plan.route` is the route
-planned; it is longer than level 1's optimum exactly when the optimum turns around.
+planned; it is longer than level 1's optimum exactly when the optimum turns around. The
+segments that hold such a turnaround are planned once, without the retries that mend
+other infeasible curves: no forward curve can drive them (a three-point turn would be
+needed), and the trajectory reports itself infeasible.
 """
 
 from __future__ import annotations
@@ -136,6 +139,7 @@ def plan(
             raise RoadBlockedError(f"{last}; no other route: {err}", station=last.station,
                                    edge=last.edge, junction=last.junction) from err
         corridor = route_corridor(network, route, vclass=vclass)
+        back = {(route.edges[i], route.edges[i + 1]) for i in turnarounds(network, route)}
         t_route += time.perf_counter() - t0
         xy = (corridor.to_xy(start_pos, 0.0) if start_xy is None
               else np.asarray(start_xy, dtype=float).reshape(2))
@@ -144,7 +148,8 @@ def plan(
         try:
             result = plan_corridor(corridor, obstacles, xy, heading,
                                    roadmap_params=roadmap_params, params=trajectory_params,
-                                   start_speed=start_speed, end_speed=end_speed)
+                                   start_speed=start_speed, end_speed=end_speed,
+                                   turnarounds=back)
         except RoadBlockedError as err:
             edge = err.closed_edge
             if edge is None or edge in (from_edge, to_edge) or edge in avoided or \

@@ -19,9 +19,10 @@ against the original obstacles.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -89,6 +90,7 @@ def plan_corridor(
     params: TrajectoryParams | None = None,
     start_speed: float = 0.0,
     end_speed: float | None = 0.0,
+    turnarounds: Collection[tuple[str, str]] = (),
 ) -> CorridorPlan:
     """Roadmaps and one continuous trajectory along the whole corridor.
 
@@ -103,6 +105,10 @@ def plan_corridor(
     start_speed, end_speed
         Speeds [m/s] at the start and at the end of the corridor (0 stops there, ``None``
         keeps going).
+    turnarounds
+        Junctions ``(from_edge, to_edge)`` of the corridor's edges where the route turns
+        back. No forward curve turns within a road's width, so a segment that holds one
+        is planned once: its curve's alternatives and other joins are not tried.
     """
     rp = roadmap_params or RoadmapParams()
     tp = params or TrajectoryParams()
@@ -127,9 +133,11 @@ def plan_corridor(
             near = obstacles.near_mask(seg.polygon(), 0.0)
             if not near.all():
                 seg_obs, seg_grown = obstacles.subset(near), grown.subset(near)
+        hopeless = bool(turnarounds) and any(
+            pair in turnarounds for pair in itertools.pairwise(seg.edges))
         joins = ([-1] if prev is None else
                  join_indices(prev, pieces[i - 1], seg.offset - pieces[i - 1].offset,
-                              overlap)[:JOIN_TRIES])
+                              overlap)[:1 if hopeless else JOIN_TRIES])
         tried: list[tuple[int, Roadmap, Trajectory]] = []
         for attempt, cut in enumerate(joins):
             if prev is not None:
@@ -143,7 +151,7 @@ def plan_corridor(
                     rm, seg, seg_obs, tp if prev is None else tp_join,
                     start_heading if prev is None else float(prev.heading[cut]),
                     start_speed=start_speed if prev is None else float(prev.speed[cut]),
-                    end_speed=None)
+                    end_speed=None, alternatives=not hopeless)
             except SplineplanError:
                 if attempt + 1 == len(joins):
                     raise

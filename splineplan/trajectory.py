@@ -233,6 +233,7 @@ def plan_trajectory(
     *,
     start_speed: float = 0.0,
     end_speed: float | None = None,
+    alternatives: bool = True,
 ) -> Trajectory:
     """Speed-optimised B-spline trajectory along a roadmap.
 
@@ -253,6 +254,9 @@ def plan_trajectory(
         Speed [m/s] at the start.
     end_speed
         Speed [m/s] at the end: 0 stops there, ``None`` keeps going as fast as allowed.
+    alternatives
+        Where the first curve is not feasible, also try the other control polygon and the
+        detour (steps 1 and 8); ``False`` where no forward curve can be (a turnaround).
 
     Raises
     ------
@@ -266,13 +270,14 @@ def plan_trajectory(
     frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                       end_speed, smooth, frame)
-    if not traj.feasible:
+    if not traj.feasible and alternatives:
         other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                            end_speed, not smooth, frame)
         log.debug("first control polygon gives no feasible curve; the other: %s",
                   other.feasible)
         traj = other if other.feasible else traj
-    if traj.feasible or params.detour_rate <= 0 or not _steep(roadmap, params.detour_rate):
+    if (traj.feasible or not alternatives or params.detour_rate <= 0
+            or not _steep(roadmap, params.detour_rate)):
         return traj
     detour = detour_roadmap(roadmap, corridor, params.detour_rate)
     if detour is None:

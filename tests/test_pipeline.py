@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import itertools
 import json
+import logging
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from conftest import GRID_TURNS
 
 from splineplan.cli import main
 from splineplan.network import load_network, read_obstacles, route_corridor
+from splineplan.obstacles import Obstacles
 from splineplan.pipeline import plan
 from splineplan.route import shortest_route
 from splineplan.trajectory import TrajectoryParams
@@ -152,6 +154,46 @@ def test_monaco_routes_plan_forward(monaco_net) -> None:
         tr = result.trajectory
         assert np.hypot(np.diff(tr.x), np.diff(tr.y)).max() < 2.0
         assert tr.s[-1] == pytest.approx(cor.length, rel=0.05)
+
+
+def test_a_turnaround_segment_is_planned_once(monaco_net, caplog) -> None:
+    """Monaco -1511#1 -> -2423 must turn back from 2423 onto -2423 (a dead end), 1.75 km
+    in. The segments before the turnaround's are planned as without the hint; the
+    turnaround's segment is planned once and reported infeasible, with the curvature
+    beyond the turning limit at the turnaround."""
+    from splineplan.pipeline import turnarounds
+    from splineplan.planner import plan_corridor
+
+    net = load_network(monaco_net)
+    result = plan(net, "-1511#1", "-2423")
+    route, cor = result.route, result.corridor
+    back = [(route.edges[i], route.edges[i + 1]) for i in turnarounds(net, route)]
+    assert back == [("2423", "-2423")]
+    tr = result.trajectory
+    assert not tr.feasible
+    at = float(cor.edge_ends[route.edges.index("2423")])
+    st = cor.to_sl(tr.xy)[:, 0]
+    turning = np.abs(st - at) < 15.0
+    assert np.abs(tr.curvature[turning]).max() > TrajectoryParams().kappa_max
+    start = cor.to_xy(0.0, 0.0)
+    heading = float(cor.heading_at(0.0))
+    tries, plans = [], []
+    for hint in (back, ()):
+        caplog.clear()
+        with caplog.at_level(logging.DEBUG, logger="splineplan.trajectory"):
+            plans.append(plan_corridor(cor, Obstacles.empty(), start, heading,
+                                       turnarounds=hint))
+        tries.append(sum("the other:" in r.getMessage() for r in caplog.records))
+    hinted, plain = plans
+    # without the hint the turnaround's segment also tries the other control polygon
+    assert tries[0] < tries[1]
+    np.testing.assert_array_equal(hinted.trajectory.x, tr.x)
+    # the same curve up to the turnaround's segment (it starts at most 300 m before it)
+    ahead = np.flatnonzero(st < at - 300.0 - 30.0)
+    assert len(ahead) > 1000
+    np.testing.assert_array_equal(plain.trajectory.x[ahead], tr.x[ahead])
+    np.testing.assert_array_equal(plain.trajectory.y[ahead], tr.y[ahead])
+    assert not plain.trajectory.feasible
 
 
 @pytest.mark.parametrize(("start", "goal"), GRID_TURNS)
