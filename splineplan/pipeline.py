@@ -10,9 +10,9 @@ on itself, and levels 2 and 3 plan forward motion only, so the pipeline asks lev
 the shortest route without turnaround connections (SUMO direction ``t``) and falls back to
 the shortest route only when every route needs one. :attr:`Plan.route` is the route
 planned; it is longer than level 1's optimum exactly when the optimum turns around. The
-segments that hold such a turnaround are planned once, without the retries that mend
-other infeasible curves: no forward curve can drive them (a three-point turn would be
-needed), and the trajectory reports itself infeasible.
+segments that hold such a turnaround get the first curve through their roadmap, without
+the repair, optimisation and retries that mend other curves: no forward curve can drive
+them (a three-point turn would be needed), and the trajectory reports itself infeasible.
 """
 
 from __future__ import annotations

@@ -159,8 +159,8 @@ def test_monaco_routes_plan_forward(monaco_net) -> None:
 def test_a_turnaround_segment_is_planned_once(monaco_net, caplog) -> None:
     """Monaco -1511#1 -> -2423 must turn back from 2423 onto -2423 (a dead end), 1.75 km
     in. The segments before the turnaround's are planned as without the hint; the
-    turnaround's segment is planned once and reported infeasible, with the curvature
-    beyond the turning limit at the turnaround."""
+    turnaround's segment is planned once, without moves, and reported infeasible, with
+    the curvature beyond the turning limit at the turnaround."""
     from splineplan.pipeline import turnarounds
     from splineplan.planner import plan_corridor
 
@@ -185,8 +185,10 @@ def test_a_turnaround_segment_is_planned_once(monaco_net, caplog) -> None:
                                        turnarounds=hint))
         tries.append(sum("the other:" in r.getMessage() for r in caplog.records))
     hinted, plain = plans
-    # without the hint the turnaround's segment also tries the other control polygon
+    # without the hint the turnaround's segment also tries the other control polygon,
+    # and equation (3)'s moves
     assert tries[0] < tries[1]
+    assert hinted.trajectory.iterations.tried < plain.trajectory.iterations.tried
     np.testing.assert_array_equal(hinted.trajectory.x, tr.x)
     # the same curve up to the turnaround's segment (it starts at most 300 m before it)
     ahead = np.flatnonzero(st < at - 300.0 - 30.0)
