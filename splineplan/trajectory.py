@@ -49,6 +49,8 @@ Steps, and the choices beyond the paper:
    The result reports ``feasible`` honestly.
 6. Single moves can sharpen a bend for a while, so the curve returned is the one with the
    highest minimum allowed speed seen after any round: it never decreases.
+   Where neither control polygon (nor the detour, step 8) gives a feasible curve, the one
+   returned is the least violating: footprint first, then curvature, as in step 3.
 7. Speed profile (:mod:`splineplan.speed`) along the final curve, sampled evenly in arc length.
 8. Detour: where the curve along level 2's path ends infeasible (the widest path can cross
    lanes faster than any curve within the turning limit), the same graph is searched for
@@ -275,7 +277,7 @@ def plan_trajectory(
                            end_speed, not smooth, frame)
         log.debug("first control polygon gives no feasible curve; the other: %s",
                   other.feasible)
-        traj = other if other.feasible else traj
+        traj = _less_violating(traj, other, params)
     if (traj.feasible or not alternatives or params.detour_rate <= 0
             or not _steep(roadmap, params.detour_rate)):
         return traj
@@ -285,7 +287,27 @@ def plan_trajectory(
     other = _plan_once(detour, corridor, obstacles, params, start_heading, start_speed,
                        end_speed)
     log.debug("level 2's path gives no feasible curve; detour feasible: %s", other.feasible)
-    return other if other.feasible else traj
+    return _less_violating(traj, other, params)
+
+
+def _violation(tr: Trajectory, params: TrajectoryParams) -> tuple[float, float]:
+    """How far [m] the footprint comes inside its margins (obstacles and road edges), and
+    the curvature [1/m] beyond the turning limit: 0 and 0 where feasible."""
+    inside = max(tr.safety_margin - float(np.min(tr.clearance_obstacles)),
+                 tr.road_margin - float(np.min(tr.clearance_road)), 0.0)
+    return inside, max(float(np.max(np.abs(tr.curvature))) - params.kappa_max, 0.0)
+
+
+def _less_violating(first: Trajectory, other: Trajectory, params: TrajectoryParams
+                    ) -> Trajectory:
+    """The feasible one of two curves, the first if both are; where neither is, the one
+    whose footprint comes less far inside its margins, then the one less over the turning
+    limit (the order of the repair, step 3): a curve that leaves the road is worse than
+    one that asks for a tighter turn than the vehicle has."""
+    if first.feasible or (not other.feasible and (
+            _violation(first, params) <= _violation(other, params))):
+        return first
+    return other
 
 
 def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,

@@ -198,6 +198,27 @@ def test_a_turnaround_segment_is_planned_once(monaco_net, caplog) -> None:
     assert not plain.trajectory.feasible
 
 
+def test_where_no_curve_is_feasible_the_one_on_the_road_is_kept(monaco_net) -> None:
+    """A replan of the Monaco scenario at 8.9 m/s, 5 m before a 37 degree kink of the
+    single lane of -2081#1: the least-bending polygon's curve leaves the lane by 0.15 m,
+    the other polygon's stays on it but asks for a turn tighter than the vehicle's. Both
+    are infeasible; the one kept is the one on the road (footprint before curvature)."""
+    from splineplan.planner import plan_corridor
+
+    net = load_network(monaco_net)
+    route = shortest_route(net, "-1718#11", "1756#0", turnarounds=False, start_pos=20.0)
+    cor = route_corridor(net, route)
+    xy = np.array([4381.620244, 1866.317861])
+    s0 = float(cor.to_sl(xy[None])[0, 0])
+    window = cor.slice(s0 - 4.5, s0 + 100.0)
+    plan = plan_corridor(window, Obstacles.empty(), xy, -2.742427499, start_speed=8.9427917,
+                         end_speed=None)
+    tr = plan.trajectory
+    assert not tr.feasible
+    assert float(np.min(tr.clearance_road)) >= tr.road_margin - 1e-6
+    assert float(np.max(np.abs(tr.curvature))) > TrajectoryParams().kappa_max
+
+
 @pytest.mark.parametrize(("start", "goal"), GRID_TURNS)
 def test_junction_turns_are_feasible_and_stay_on_the_pavement(grid, start: str,
                                                               goal: str) -> None:
