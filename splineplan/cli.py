@@ -11,7 +11,7 @@ import argparse
 import logging
 import sys
 from collections.abc import Callable, Sequence
-from typing import NoReturn
+from typing import Any, NoReturn
 
 from splineplan import __version__
 from splineplan.errors import SplineplanError
@@ -329,11 +329,20 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line (argparse would print the usage too)."""
+    """An argument parser whose errors are one line (argparse would print the usage too),
+    and which takes SUMO's edge ids that start with a minus (the reverse direction of an
+    edge, ``-1511#1``) as values, not as options."""
 
     def error(self, message: str) -> NoReturn:
         print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(2)
+
+    def _parse_optional(self, arg_string: str) -> Any:
+        # a single minus followed by anything but an option of this parser: a value
+        if (arg_string.startswith("-") and not arg_string.startswith("--")
+                and len(arg_string) > 1 and arg_string[:2] not in self._option_string_actions):
+            return None
+        return super()._parse_optional(arg_string)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -38,6 +38,8 @@ def test_route_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     (["route", CITY, "SWA0", "G1G2", "--avoid", "bridge_east"], "bridge_east"),
     (["route", CITY, "SWA0", "G1G2", "--start-pos", "-3"], "start_pos"),
     (["route", CITY, "SWA0", "bus_B1C2"], "bus_B1C2"),
+    # an edge id with a leading minus is an edge id, not an option
+    (["route", CITY, "-SWA0", "G1G2"], "'-SWA0'"),
 ])
 def test_route_errors_are_one_line(args: list[str], needle: str,
                                    capsys: pytest.CaptureFixture[str]) -> None:
@@ -60,3 +62,14 @@ def test_argument_errors_are_one_line(args: list[str],
     assert info.value.code != 0
     lines = capsys.readouterr().err.strip().splitlines()
     assert len(lines) == 1 and "error" in lines[0]
+
+
+def test_edge_ids_with_a_leading_minus(monaco_net: Path,
+                                       capsys: pytest.CaptureFixture[str]) -> None:
+    """SUMO names the reverse direction of an edge with a minus (-1511#1): the CLI takes
+    such ids as edges, before or after the options, without ``--``."""
+    for args in (["route", str(monaco_net), "-1511#1", "-2951#2", "--json"],
+                 ["route", "--json", str(monaco_net), "-1511#1", "-2951#2"]):
+        assert main(args) == 0
+        data = json.loads(capsys.readouterr().out)
+        assert data["edges"][0] == "-1511#1" and data["edges"][-1] == "-2951#2"
