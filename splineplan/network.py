@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import itertools
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -515,11 +515,11 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     ends_s = _project_each(probe, np.array([pieces[k][0][-1] for k in starts]), own)
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     # each junction's stretch within the paving of it and of the junctions beside it (a
-    # short edge between two junctions lies in both stretches)
+    # short edge between two junctions lies in both stretches), holding its internal lanes
     for i in range(len(edges) - 1):
         _clip_to_paved(probe, left_off, right_off, ends_s[i], starts_s[i + 1],
-                       _joined(network, edges[max(i - 1, 0):i + 3], cls),
-                       _junction_paving(network, edges[i], edges[i + 1], cls, via=True))
+                       _paving(network, edges[max(i - 1, 0):i + 3], cls),
+                       _internal_paving(network, edges[i], edges[i + 1], cls))
     keep_left = keep_right = None
     if keep:
         keep_left, keep_right = _union_offsets(probe, keep,
@@ -532,7 +532,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
 
 
 #: Length [m] of the lanes before and after a junction that count as its paving (see
-#: :func:`_junction_paving`), and the stations [m] beyond the junction's own stretch over
+#: :func:`_junction_quads`), and the stations [m] beyond the junction's own stretch over
 #: which the corridor is clipped to it.
 PAVING_REACH = 12.0
 PAVING_PAD = 3.0
@@ -545,62 +545,63 @@ PAVING_CAP = 0.5
 PAVING_RANGE = 30.0
 
 
-def _junction_paving(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
-                     via: bool = False) -> tuple[FloatArray, FloatArray, IntArray]:
-    """The paving of the junction between two route edges, as polygons: x ``(v,)``, y
-    ``(v,)`` [m] of their vertices, polygon after polygon, and where each starts ``(k + 1,)``.
-
-    They are SUMO's outline of the junction, the internal lanes of the allowed connections
-    between the two edges, and the last and first :data:`PAVING_REACH` metres of the two
-    edges' allowed lanes, each lane as one quadrilateral per segment of its centre line
-    (extended to the mitre at each bend); with ``via``, the internal lanes only. Once per
-    network and edge pair (read-only).
-    """
-    key = ("paving", from_edge, to_edge, vclass, str(via))
-    if key not in network._bands:
-        polys: list[FloatArray] = []
-        outline = network.junction_shapes.get(network.to_nodes[network.edge_index(from_edge)])
-        if outline is not None and not via:
-            polys.append(outline)
-        for ln in () if via else network.lanes_of(from_edge):
-            if ln.allows(vclass):
-                polys += _lane_quads(_tail(ln.shape, PAVING_REACH), ln.width)
-        for ln in () if via else network.lanes_of(to_edge):
-            if ln.allows(vclass):
-                polys += _lane_quads(_tail(ln.shape[::-1], PAVING_REACH)[::-1], ln.width)
-        for c in network.connections_between(from_edge, to_edge, vclass=vclass):
-            for v in c.via:
-                lane = network.internal_lanes[v]
-                polys += _lane_quads(lane.shape, lane.width)
-        polys = [p for p in polys if len(p) >= 3]
-        offsets = np.concatenate(([0], np.cumsum([len(p) for p in polys]))).astype(np.int64)
-        pts = np.concatenate(polys) if polys else np.zeros((0, 2))
-        paving = (np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), offsets)
-        for a in paving:
-            a.setflags(write=False)
-        network._bands[key] = paving
-    found: tuple[FloatArray, FloatArray, IntArray] = network._bands[key]
-    return found
-
-
-def _joined(network: RoadNetwork, edges: tuple[str, ...], vclass: str
+def _paving(network: RoadNetwork, edges: tuple[str, ...], vclass: str
             ) -> tuple[FloatArray, FloatArray, IntArray]:
-    """The pavings (see :func:`_junction_paving`) of the junctions between consecutive
-    ``edges`` as one, once per network and edges (read-only)."""
-    key = ("paving", *edges, vclass)
-    if key not in network._bands:
-        pavings = [_junction_paving(network, a, b, vclass)
-                   for a, b in itertools.pairwise(edges)]
-        starts = np.cumsum([0] + [len(p[0]) for p in pavings[:-1]])
-        offsets = np.concatenate([[0]] + [p[2][1:] + a
-                                          for p, a in zip(pavings, starts, strict=True)])
-        joined = (np.concatenate([p[0] for p in pavings]),
-                  np.concatenate([p[1] for p in pavings]), offsets.astype(np.int64))
-        for arr in joined:
-            arr.setflags(write=False)
-        network._bands[key] = joined
-    found: tuple[FloatArray, FloatArray, IntArray] = network._bands[key]
-    return found
+    """The paving of the junctions between consecutive ``edges`` (see
+    :func:`_junction_quads`), as :func:`_packed`; once per network (read-only)."""
+    paving: tuple[FloatArray, FloatArray, IntArray] = _kept(
+        network, ("paving", *edges, vclass),
+        lambda: _packed([q for a, b in itertools.pairwise(edges)
+                         for q in _junction_quads(network, a, b, vclass)]))
+    return paving
+
+
+def _internal_paving(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str
+                     ) -> tuple[FloatArray, FloatArray, IntArray]:
+    """The internal lanes between two edges (see :func:`_internal_quads`), as
+    :func:`_packed`; once per network (read-only)."""
+    paving: tuple[FloatArray, FloatArray, IntArray] = _kept(
+        network, ("internal", from_edge, to_edge, vclass),
+        lambda: _packed(_internal_quads(network, from_edge, to_edge, vclass)))
+    return paving
+
+
+def _junction_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str
+                    ) -> list[FloatArray]:
+    """The paving of the junction between two route edges as polygons: SUMO's outline of
+    the junction, the last and first :data:`PAVING_REACH` metres of the two edges' allowed
+    lanes (see :func:`_lane_quads`) and the internal lanes of the allowed connections
+    between them."""
+    polys: list[FloatArray] = []
+    outline = network.junction_shapes.get(network.to_nodes[network.edge_index(from_edge)])
+    if outline is not None:
+        polys.append(outline)
+    for ln in network.lanes_of(from_edge):
+        if ln.allows(vclass):
+            polys += _lane_quads(_tail(ln.shape, PAVING_REACH), ln.width)
+    for ln in network.lanes_of(to_edge):
+        if ln.allows(vclass):
+            polys += _lane_quads(_tail(ln.shape[::-1], PAVING_REACH)[::-1], ln.width)
+    return polys + _internal_quads(network, from_edge, to_edge, vclass)
+
+
+def _internal_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str
+                    ) -> list[FloatArray]:
+    """The internal lanes of the allowed connections between two edges, as polygons."""
+    return [q for c in network.connections_between(from_edge, to_edge, vclass=vclass)
+            for v in c.via
+            for q in _lane_quads(network.internal_lanes[v].shape,
+                                 network.internal_lanes[v].width)]
+
+
+def _packed(polys: list[FloatArray]) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Polygons (of three points or more) as x ``(v,)``, y ``(v,)`` [m] of their vertices,
+    polygon after polygon, and where each starts ``(k + 1,)``: what
+    :func:`_paved_spans` takes."""
+    polys = [p for p in polys if len(p) >= 3]
+    offsets = np.concatenate(([0], np.cumsum([len(p) for p in polys]))).astype(np.int64)
+    pts = np.concatenate(polys) if polys else np.zeros((0, 2))
+    return np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), offsets
 
 
 def _tail(shape: FloatArray, length: float) -> FloatArray:
@@ -654,7 +655,7 @@ def _clip_to_paved(probe: Corridor, left: FloatArray, right: FloatArray, s0: flo
     # the reference's points and the headings of the segments from them
     cx = np.ascontiguousarray(probe.reference[i0:i1, 0])
     cy = np.ascontiguousarray(probe.reference[i0:i1, 1])
-    h = probe._heading[np.minimum(np.arange(i0, i1), len(probe._heading) - 1)]
+    h = probe.heading_at(probe.s[i0:i1])
     tx, ty = np.cos(h), np.sin(h)
     mid = (left[i0:i1] + right[i0:i1]) / 2.0
     lo, hi = _paved_spans(cx, cy, tx, ty, mid, px, py, offsets, PAVING_GAP)
@@ -737,31 +738,33 @@ def _paved_spans(cx: FloatArray, cy: FloatArray, tx: FloatArray, ty: FloatArray,
     return lo, hi
 
 
-def _frozen(band: tuple[FloatArray, FloatArray, FloatArray] | None
-            ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
-    if band is not None:
-        for a in band:
+def _kept(network: RoadNetwork, key: tuple[str, ...], make: Callable[[], Any]) -> Any:
+    """What ``make()`` builds of the network's geometry, once per network (``key``); its
+    arrays read-only, as the corridors of many routes share them."""
+    if key not in network._bands:
+        value = make()
+        for a in value if value is not None else ():
             a.setflags(write=False)
-    return band
+        network._bands[key] = value
+    return network._bands[key]
 
 
 def _edge_band(network: RoadNetwork, right: Lane, left: Lane
                ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """:func:`_band` between two lanes of an edge, once per network (read-only)."""
-    key = ("edge", right.id, left.id)
-    if key not in network._bands:
-        network._bands[key] = _frozen(_band(right.shape, right.width, left.shape, left.width))
-    band: tuple[FloatArray, FloatArray, FloatArray] = network._bands[key]
+    band: tuple[FloatArray, FloatArray, FloatArray] = _kept(
+        network, ("edge", right.id, left.id),
+        lambda: _band(right.shape, right.width, left.shape, left.width))
     return band
 
 
 def _cached_junction_band(network: RoadNetwork, incoming: list[Lane], outgoing: list[Lane]
                           ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
     """:func:`_junction_band`, once per network and lanes (read-only)."""
-    key = ("junction", incoming[0].id, incoming[-1].id, outgoing[0].id, outgoing[-1].id)
-    if key not in network._bands:
-        network._bands[key] = _frozen(_junction_band(incoming, outgoing))
-    band: tuple[FloatArray, FloatArray, FloatArray] | None = network._bands[key]
+    band: tuple[FloatArray, FloatArray, FloatArray] | None = _kept(
+        network, ("junction", incoming[0].id, incoming[-1].id, outgoing[0].id,
+                  outgoing[-1].id),
+        lambda: _junction_band(incoming, outgoing))
     return band
 
 

@@ -315,10 +315,12 @@ def test_corridor_bands_kept_per_network_give_the_same_corridor() -> None:
         for name in ("reference", "s", "left", "right", "edge_starts", "edge_ends"):
             np.testing.assert_array_equal(getattr(cor, name), getattr(first, name))
     assert net._bands
+    kinds = {key[0] for key in net._bands}
+    assert {"edge", "junction", "paving", "internal"} <= kinds
     for band in net._bands.values():
-        if band is not None:
+        for arr in band if band is not None else ():
             with pytest.raises(ValueError):
-                band[0][0, 0] = 0.0
+                arr[(0,) * arr.ndim] = 0
 
 
 @settings(max_examples=60, deadline=None)
