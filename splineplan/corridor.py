@@ -8,6 +8,7 @@ station s is ``right(s) <= l <= left(s)``. No SUMO here: the SUMO adapter
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -79,7 +80,7 @@ class Corridor:
     _ref_x: FloatArray = field(init=False, repr=False)
     _ref_y: FloatArray = field(init=False, repr=False)
     _s: FloatArray = field(init=False, repr=False)
-    #: what other modules derive from the corridor alone, kept with it (read-only)
+    #: what other modules derive from the corridor alone (see :meth:`derived`)
     _memo: dict[Any, Any] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -115,6 +116,13 @@ class Corridor:
         cell = max(GRID_CELL, float(np.sqrt(area / (4.0 * len(self.reference)))))
         object.__setattr__(self, "_grid", (cell, *_grid_build(self._ref_x, self._ref_y, cell)))
         object.__setattr__(self, "_memo", {})
+
+    def derived(self, key: Any, make: Callable[[], Any]) -> Any:
+        """What ``make()`` derives from the corridor alone, made once per ``key`` and kept
+        with the corridor (which is immutable); callers must not change it."""
+        if key not in self._memo:
+            self._memo[key] = make()
+        return self._memo[key]
 
     # -- construction -------------------------------------------------------------------
     @classmethod

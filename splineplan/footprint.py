@@ -67,10 +67,9 @@ class _Checker:
         pts = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw], [0.0, -hw], [0.0, hw],
                         [0.0, 0.0]])
         object.__setattr__(self, "body", np.ascontiguousarray(pts.T))
-        key = ("footprint", hl, hw)
-        if key not in self.corridor._memo:  # the road's part, once per corridor and size
-            self.corridor._memo[key] = _road_frames(self.corridor, hl, hw)
-        frames, window, corners = self.corridor._memo[key]
+        # the road's part, once per corridor and vehicle size
+        frames, window, corners = self.corridor.derived(
+            ("footprint", hl, hw), lambda: _road_frames(self.corridor, hl, hw))
         object.__setattr__(self, "frames", frames)
         object.__setattr__(self, "window", window)
         object.__setattr__(self, "corners", corners)
@@ -124,8 +123,7 @@ class _Checker:
         if sc is None:
             sc = self.stations(xy)
         return kernels.footprint_slack(*_xyh(xy, heading), np.asarray(sc, dtype=float),
-                             *self._road_args(), *self.window, *self._obstacle_args(),
-                             self.margin)
+                                       *self.slack_args())
 
     def obstacles(self, xy: FloatArray, heading: FloatArray,
                   horizon: float = CLEARANCE_HORIZON, cull: bool = False) -> FloatArray:
@@ -136,6 +134,10 @@ class _Checker:
         return kernels.obstacle_clearance(*_xyh(xy, heading), *self._obstacle_args(),
                                           self.half_length, self.half_width, self.margin,
                                           float(horizon), bool(cull))
+
+    def slack_args(self) -> tuple[Any, ...]:
+        """What :func:`splineplan.kernels.footprint_slack` takes after the samples."""
+        return (*self._road_args(), *self.window, *self._obstacle_args(), self.margin)
 
     def _road_args(self) -> tuple[Any, ...]:
         rm = self.road_margin

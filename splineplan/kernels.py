@@ -147,7 +147,7 @@ def road_clearance(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray, 
                    rx: FloatArray, ry: FloatArray, hc: FloatArray, hs: FloatArray,
                    left: FloatArray, right: FloatArray, bu: FloatArray, bv: FloatArray,
                    cs: FloatArray, cx: FloatArray, cy: FloatArray, cside: FloatArray,
-                   hl: float, hw: float, margin: float, band: float, reach: float
+                   hl: float, hw: float, road_margin: float, band: float, reach: float
                    ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
     """:meth:`splineplan.footprint._Checker.road` for each pose: to the left edge [m], to
     the right [m], stations [m]."""
@@ -167,13 +167,14 @@ def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
                     st: FloatArray, rx: FloatArray, ry: FloatArray, hc: FloatArray,
                     hs: FloatArray, left: FloatArray, right: FloatArray, bu: FloatArray,
                     bv: FloatArray, cs: FloatArray, cx: FloatArray, cy: FloatArray,
-                    cside: FloatArray, hl: float, hw: float, margin: float, band: float,
+                    cside: FloatArray, hl: float, hw: float, road_margin: float, band: float,
                     reach: float, lmin: FloatArray, rmax: FloatArray, turn: FloatArray,
                     seg_heading: FloatArray, vx: FloatArray, vy: FloatArray,
                     offsets: NDArray[np.int64], bbox: FloatArray, obs_margin: float
                     ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
     """:meth:`splineplan.footprint._Checker.slack`: clearance beyond the margins [m]
-    (``margin`` from the road edges, ``obs_margin`` from the obstacles) and stations [m]."""
+    (``road_margin`` from the road edges, ``obs_margin`` from the obstacles) and stations
+    [m]."""
     n = len(x)
     road = np.empty(n)
     station = np.empty(n)
@@ -194,7 +195,7 @@ def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
         ext = (hl * abs(np.sin(dh)) + hw * abs(np.cos(dh))
                + (abs(lat) + hl + hw) * turn[i] + 0.05)
         r = min(lmin[i] - lat, lat - rmax[i]) - ext
-        if r < margin + 1e-6:
+        if r < road_margin + 1e-6:
             tl, tr, s_new = road_one(x[j], y[j], h[j], sc[j], st, rx, ry, hc, hs, left,
                                       right, bu, bv, cs, cx, cy, cside, hl, hw, band, reach,
                                       i)
@@ -202,7 +203,7 @@ def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
         road[j] = r
         station[j] = s_new
     near = obstacle_clearance(x, y, h, vx, vy, offsets, bbox, hl, hw, obs_margin, 0.0, True)
-    return np.minimum(near - obs_margin, road - margin), station
+    return np.minimum(near - obs_margin, road - road_margin), station
 
 
 @njit(cache=True)

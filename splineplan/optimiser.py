@@ -404,7 +404,7 @@ class _Optimiser:
             self.lo.astype(np.int64), self.hi.astype(np.int64),
             np.ascontiguousarray(self.cand, dtype=np.int64), self.movable, self.refused,
             self.k, p.kappa_smax, p.kappa_max, p.max_iterations, p.patience,
-            (*ch._road_args(), *ch.window, *ch._obstacle_args(), ch.margin))
+            ch.slack_args())
         tried, accepted, refused, rounds = (int(v) for v in out)
         log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)
         return tried, accepted, refused, rounds

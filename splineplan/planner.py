@@ -55,8 +55,6 @@ CUT_WINDOW = 0.6
 JOIN_LOOKAHEAD = 5.0
 #: Joins tried (see :func:`join_indices`) before a segment is left infeasible.
 JOIN_TRIES = 3
-#: Level-3 parameters of a segment that holds a turnaround (see :func:`plan_corridor`).
-HOPELESS = {"max_iterations": 0, "repair_rounds": 0}
 
 
 @dataclass(frozen=True, eq=False)
@@ -110,10 +108,9 @@ def plan_corridor(
     turnarounds
         Junctions ``(from_edge, to_edge)`` of the corridor's edges where the route turns
         back. No forward curve turns within a road's width (a three-point turn would be
-        needed), so a segment that holds one gets the first curve through its roadmap,
-        with its speed profile: no repair, no optimisation, no other control polygon,
-        detour or join. Polishing it would spend tens of milliseconds on a curve that
-        cannot be driven.
+        needed), so a segment that holds one gets the first curve through its roadmap
+        (``plan_trajectory(..., polish=False)``) from one join. Polishing it would spend
+        tens of milliseconds on a curve that cannot be driven.
     """
     rp = roadmap_params or RoadmapParams()
     tp = params or TrajectoryParams()
@@ -122,9 +119,6 @@ def plan_corridor(
     # a join's pose lies on a curve planned past it: no lead-in for its speed, which would
     # hold the next curve on the join's tangent for up to half the lead-in
     tp_join = replace(tp, lead_in_time=0.0)
-    # a segment with a turnaround: the first curve as it comes (see ``turnarounds``)
-    tp_once = replace(tp, **HOPELESS)
-    tp_join_once = replace(tp_join, **HOPELESS)
     pieces = [corridor.slice(a, b) for a, b in cuts] if len(cuts) > 1 else [corridor]
     pose = np.asarray(start_xy, dtype=float).reshape(2)
     roadmaps: list[Roadmap] = []
@@ -156,11 +150,10 @@ def plan_corridor(
                 rm = plan_roadmap(seg, seg_grown, pose, rp)
                 t1 = time.perf_counter()
                 tr = plan_trajectory(
-                    rm, seg, seg_obs, (tp if prev is None else tp_join) if not hopeless
-                    else (tp_once if prev is None else tp_join_once),
+                    rm, seg, seg_obs, tp if prev is None else tp_join,
                     start_heading if prev is None else float(prev.heading[cut]),
                     start_speed=start_speed if prev is None else float(prev.speed[cut]),
-                    end_speed=None, alternatives=not hopeless)
+                    end_speed=None, polish=not hopeless)
             except SplineplanError:
                 if attempt + 1 == len(joins):
                     raise

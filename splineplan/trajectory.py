@@ -68,7 +68,7 @@ the parameters in :mod:`splineplan.trajectory_params` and the curvature in
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -235,7 +235,7 @@ def plan_trajectory(
     *,
     start_speed: float = 0.0,
     end_speed: float | None = None,
-    alternatives: bool = True,
+    polish: bool = True,
 ) -> Trajectory:
     """Speed-optimised B-spline trajectory along a roadmap.
 
@@ -256,9 +256,10 @@ def plan_trajectory(
         Speed [m/s] at the start.
     end_speed
         Speed [m/s] at the end: 0 stops there, ``None`` keeps going as fast as allowed.
-    alternatives
-        Where the first curve is not feasible, also try the other control polygon and the
-        detour (steps 1 and 8); ``False`` where no forward curve can be (a turnaround).
+    polish
+        ``False``: the first curve through the roadmap as it comes, with its speed
+        profile: no repair, no equation (3), no other control polygon and no detour
+        (steps 3, 4 and 8), for a roadmap that no forward curve can drive (a turnaround).
 
     Raises
     ------
@@ -268,17 +269,19 @@ def plan_trajectory(
     params = params or TrajectoryParams()
     if not (np.isfinite(start_speed) and start_speed >= 0):
         raise TrajectoryError(f"start speed must be >= 0, got {start_speed!r}")
+    if not polish:
+        params = replace(params, max_iterations=0, repair_rounds=0)
     smooth = _sharp_bend(roadmap, corridor, params)
     frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                       end_speed, smooth, frame)
-    if not traj.feasible and alternatives:
+    if not traj.feasible and polish:
         other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                            end_speed, not smooth, frame)
         log.debug("first control polygon gives no feasible curve; the other: %s",
                   other.feasible)
         traj = _less_violating(traj, other, params)
-    if (traj.feasible or not alternatives or params.detour_rate <= 0
+    if (traj.feasible or not polish or params.detour_rate <= 0
             or not _steep(roadmap, params.detour_rate)):
         return traj
     detour = detour_roadmap(roadmap, corridor, params.detour_rate)
