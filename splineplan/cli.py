@@ -133,19 +133,26 @@ def _cmd_plan_image(args: argparse.Namespace) -> int:
           f"min clearance {tr.min_clearance:.2f} m, feasible: {'yes' if tr.feasible else 'no'}")
     print(f"written to {out}/ (trajectory.csv, plan.json"
           f"{'' if args.no_plot else ', roadmap.png, trajectory.png, speed.png'})")
-    if not tr.feasible:
-        import numpy as np
-
-        kappa = float(np.max(np.abs(tr.curvature)))
-        obs, road = float(np.min(tr.clearance_obstacles)), float(np.min(tr.clearance_road))
-        why = (f"it comes within {obs:.2f} m of an obstacle (margin {tr.safety_margin:.2f} m)"
-               if obs < tr.safety_margin - 1e-6 else
-               f"its clearance to the road edge drops to {road:.2f} m (margin "
-               f"{tr.road_margin:.2f} m)" if road < tr.road_margin - 1e-6 else
-               f"curvature up to {kappa:.3f} 1/m exceeds the limit {params.kappa_max:.3f} 1/m")
-        print(f"splineplan plan-image: warning: the trajectory is not feasible: {why}",
-              file=sys.stderr)
+    _report_infeasible("plan-image", tr, plan.corridor)
     return 0
+
+
+#: At most this many broken limits are listed for an infeasible plan.
+MAX_REPORTED_VIOLATIONS = 5
+
+
+def _report_infeasible(command: str, trajectory: Any, corridor: Any) -> None:
+    """On stderr: which limit an infeasible trajectory breaks, where (station, edge)."""
+    if trajectory.feasible:
+        return
+    found = trajectory.violations
+    print(f"splineplan {command}: warning: the trajectory is not feasible "
+          f"({len(found)} limit{'s' if len(found) != 1 else ''} broken):", file=sys.stderr)
+    for v in found[:MAX_REPORTED_VIOLATIONS]:
+        print(f"  {v.describe(corridor)}", file=sys.stderr)
+    if len(found) > MAX_REPORTED_VIOLATIONS:
+        print(f"  ... and {len(found) - MAX_REPORTED_VIOLATIONS} more (plan.json lists them)",
+              file=sys.stderr)
 
 
 def _add_plot(sub: argparse._SubParsersAction) -> None:
@@ -281,6 +288,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
           f"{1e3 * result.trajectory_seconds:.1f} ms")
     print(f"written to {out}/ (trajectory.csv, plan.json)"
           + (f" and {args.plot}" if args.plot else ""))
+    _report_infeasible("plan", tr, result.corridor)
     return 0
 
 

@@ -320,8 +320,8 @@ def _arc_length(x: ArrayLike, y: ArrayLike) -> FloatArray:
 def _scalars(obj: Any) -> dict[str, Any]:
     """A trajectory's scalar results, JSON-ready.
 
-    The scalar (and nested dataclass) fields of a dataclass, plus its ``min_clearance``,
-    ``duration`` and ``length`` where it has them.
+    The scalar (and nested dataclass, and tuple of dataclasses) fields of a dataclass, plus
+    its ``min_clearance``, ``duration`` and ``length`` where it has them.
     """
     if not dataclasses.is_dataclass(obj):
         return dict(getattr(obj, "info", {}))
@@ -330,7 +330,7 @@ def _scalars(obj: Any) -> dict[str, Any]:
         v = getattr(obj, f.name)
         if dataclasses.is_dataclass(v) or (
             isinstance(v, bool | int | float | str | np.generic) and np.ndim(v) == 0
-        ):
+        ) or (isinstance(v, tuple) and all(dataclasses.is_dataclass(x) for x in v)):
             out[f.name] = _plain(v)
     for name in ("min_clearance", "duration", "length"):
         v = getattr(obj, name, None)

@@ -41,7 +41,9 @@ from splineplan.trajectory import (
     Trajectory,
     TrajectoryParams,
     _times,
+    broken_limits,
     plan_trajectory,
+    sample_violations,
 )
 
 log = logging.getLogger(__name__)
@@ -193,9 +195,9 @@ def _infeasible_samples(tr: Trajectory, kappa_max: float) -> NDArray[np.bool_]:
     """Per sample: curvature over ``kappa_max`` [1/m], or the footprint within the safety
     margin of an obstacle or the road margin of a road edge (with level 3's tolerance for
     rounding)."""
-    return ((np.abs(tr.curvature) > kappa_max * (1.0 + 1e-6))
-            | (tr.clearance_obstacles < tr.safety_margin - 1e-6)
-            | (tr.clearance_road < tr.road_margin - 1e-6))
+    obs, road, kappa = broken_limits(tr.curvature, tr.clearance_obstacles, tr.clearance_road,
+                                     tr.safety_margin, tr.road_margin, kappa_max)
+    return obs | road | kappa
 
 
 def _fails_near_start(tr: Trajectory, reach: float, kappa_max: float) -> bool:
@@ -295,7 +297,9 @@ def _head(tr: Trajectory, n: int, kappa_max: float) -> Trajectory:
                    clearance_road=tr.clearance_road[:n])
     if tr.feasible:
         return head
-    return replace(head, feasible=not _infeasible_samples(head, kappa_max).any())
+    broken = sample_violations(head.s, head.xy, head.curvature, head.clearance_obstacles,
+                               head.clearance_road, tr.safety_margin, tr.road_margin, kappa_max)
+    return replace(head, feasible=not broken, violations=broken)
 
 
 def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,
@@ -319,6 +323,9 @@ def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,
     stats = IterationStats(*(sum(getattr(p.iterations, f) for p in parts)
                              for f in ("tried", "accepted", "refused", "rounds",
                                        "refinements", "control_points", "doubled")))
+    starts = np.cumsum([0] + [len(p.s) - 1 for p in parts[:-1]])
+    violations = tuple(replace(v, s=v.s - p.s[0] + s[i])
+                       for p, i in zip(parts, starts, strict=True) for v in p.violations)
     return Trajectory(
         _times(s, speed), cat["x"], cat["y"], cat["heading"], speed, cat["curvature"], s,
         np.concatenate([p.control_points for p in parts]),
@@ -326,4 +333,4 @@ def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,
         cat["clearance_obstacles"], cat["clearance_road"],
         all(p.feasible for p in parts), stats,
         min(p.min_speed_before for p in parts), min(p.min_speed_after for p in parts),
-        parts[0].safety_margin, parts[0].road_margin)
+        parts[0].safety_margin, parts[0].road_margin, violations)

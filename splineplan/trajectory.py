@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -97,9 +98,12 @@ __all__ = [
     "IterationStats",
     "Trajectory",
     "TrajectoryParams",
+    "Violation",
+    "broken_limits",
     "curvature_discrete",
     "curvature_from_derivatives",
     "plan_trajectory",
+    "sample_violations",
 ]
 
 log = logging.getLogger(__name__)
@@ -118,6 +122,48 @@ class IterationStats:
     refinements: int = 0
     control_points: int = 0
     doubled: int = 0
+
+
+@dataclass(frozen=True)
+class Violation:
+    """Where a trajectory breaks one of its limits, at its worst point.
+
+    ``kind`` is ``"obstacle"`` (the footprint comes within the safety margin of an
+    obstacle), ``"road"`` (within the road margin of a road edge, negative: off the road) or
+    ``"curvature"`` (a turn tighter than ``1 / min_turn_radius``); ``value`` is the worst
+    clearance [m] or curvature [1/m] and ``limit`` the margin or the turning limit it
+    breaks; ``s`` [m] is the arc length along the trajectory and ``x, y`` [m] the vehicle's
+    centre there.
+    """
+
+    kind: str
+    value: float
+    limit: float
+    s: float
+    x: float
+    y: float
+
+    def describe(self, corridor: Corridor | None = None) -> str:
+        """One phrase saying what is broken where; with the corridor the plan followed,
+        also the station along it and the SUMO edge (or junction) there."""
+        what = (f"curvature {self.value:.3f} 1/m above the turning limit {self.limit:.3f} 1/m"
+                if self.kind == "curvature" else
+                f"footprint {self.value:.2f} m from an obstacle (safety margin "
+                f"{self.limit:.2f} m)" if self.kind == "obstacle" else
+                f"footprint {self.value:.2f} m from the road edge (road margin "
+                f"{self.limit:.2f} m)" if self.value >= 0 else
+                f"footprint {-self.value:.2f} m off the road")
+        where = f"{self.s:.1f} m along the trajectory, at ({self.x:.1f}, {self.y:.1f})"
+        if corridor is not None:
+            station = float(corridor.to_sl(np.array([[self.x, self.y]]))[0, 0])
+            junction = corridor.junction_at(station)
+            edge = corridor.edge_at(station)
+            where += f", station {corridor.offset + station:.1f} m"
+            if junction is not None:
+                where += f" (junction {junction[0]} -> {junction[1]})"
+            elif edge is not None:
+                where += f" (edge {edge})"
+        return f"{what}, {where}"
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,6 +197,11 @@ class Trajectory:
     safety_margin, road_margin
         Margins [m] from the obstacles and from the road edges that the feasibility was
         checked with.
+    violations
+        Why the trajectory is infeasible: each broken limit at its worst point
+        (:class:`Violation`; one per limit and planned piece, in order along the curve
+        within a piece), empty exactly when ``feasible``. The limits are also checked
+        on the optimiser's own samples of the curve, which lie between these samples.
     """
 
     t: FloatArray
@@ -170,6 +221,7 @@ class Trajectory:
     min_speed_after: float = float("nan")
     safety_margin: float = 0.0
     road_margin: float = 0.0
+    violations: tuple[Violation, ...] = ()
 
     @property
     def xy(self) -> FloatArray:
@@ -222,7 +274,8 @@ class Trajectory:
             tt, x, y, head, v, np.interp(tt, self.t, self.curvature), s, self.control_points,
             self.spline, np.interp(tt, self.t, self.clearance_obstacles),
             np.interp(tt, self.t, self.clearance_road), self.feasible, self.iterations,
-            self.min_speed_before, self.min_speed_after, self.safety_margin, self.road_margin)
+            self.min_speed_before, self.min_speed_after, self.safety_margin, self.road_margin,
+            self.violations)
 
 
 # ---- planning --------------------------------------------------------------------------
@@ -337,15 +390,16 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     return Trajectory(
         traj["t"], traj["x"], traj["y"], traj["heading"], traj["speed"], traj["curvature"],
         traj["s"], final, spline, traj["clear_obs"], traj["clear_road"],
-        bool(traj["feasible"]), stats, float(v_before.min()),
+        not traj["violations"], stats, float(v_before.min()),
         float(allowed_speed(opt.kappa, mu=params.mu, g=params.g, s_max=params.s_max).min()),
-        rp.safety_margin, params.road_margin)
+        rp.safety_margin, params.road_margin, traj["violations"])
 
 
 def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
             params: TrajectoryParams, rp: RoadmapParams, start_speed: float,
-            end_speed: float | None) -> dict[str, FloatArray]:
-    """Samples evenly spaced in arc length, with speeds, times and clearances."""
+            end_speed: float | None) -> dict[str, Any]:
+    """Samples evenly spaced in arc length, with speeds, times, clearances and the limits
+    they break."""
     # arc length on a table four times denser than the optimiser's samples
     sub = 4
     grid = curve.u[:-1, None] + np.diff(curve.u)[:, None] * (np.arange(sub) / sub)[None, :]
@@ -363,14 +417,67 @@ def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
                           start_speed=start_speed, end_speed=end_speed)
     clear_obs = checker.obstacles(pos, head)
     clear_road, _ = checker.road(pos, head, np.interp(uu, curve.u, opt.station))
-    feasible = (np.all(clear_obs >= rp.safety_margin - 1e-6)
-                and np.all(clear_road >= params.road_margin - 1e-6)
-                and np.all(np.abs(kappa) <= params.kappa_max * (1 + 1e-6))
-                and np.all(opt.slack >= -1e-6)
-                and np.all(opt.kappa <= params.kappa_max * (1 + 1e-6)))
+    violations = sample_violations(s, pos, kappa, clear_obs, clear_road, rp.safety_margin,
+                                   params.road_margin, params.kappa_max)
+    # the optimiser's samples lie between these, and its verdict counts too: a limit
+    # broken only there is reported at its sample (arc length read off the dense table)
+    s_opt = np.interp(curve.u, ud, sd)
+    between = sample_violations(s_opt, opt.pos, opt.kappa, np.full(len(s_opt), np.inf),
+                                np.full(len(s_opt), np.inf), rp.safety_margin,
+                                params.road_margin, params.kappa_max)
+    if np.any(opt.slack < -1e-6):
+        j = int(np.argmin(opt.slack))
+        pj, hj = opt.pos[j:j + 1], np.arctan2(opt.d1[j:j + 1, 1], opt.d1[j:j + 1, 0])
+        obs = float(checker.obstacles(pj, hj)[0]) - rp.safety_margin
+        road = float(checker.road(pj, hj, opt.station[j:j + 1])[0][0]) - params.road_margin
+        kind, margin = (("obstacle", rp.safety_margin) if obs <= road
+                        else ("road", params.road_margin))
+        between += (Violation(kind, margin + float(opt.slack[j]), margin, float(s_opt[j]),
+                              float(pj[0, 0]), float(pj[0, 1])),)
     return {"t": _times(s, speed), "x": pos[:, 0], "y": pos[:, 1], "heading": head,
             "speed": speed, "curvature": kappa, "s": s, "clear_obs": clear_obs,
-            "clear_road": clear_road, "feasible": np.asarray(feasible)}
+            "clear_road": clear_road, "violations": _worst_of(violations + between)}
+
+
+def sample_violations(s: FloatArray, xy: FloatArray, curvature: FloatArray,
+                      clear_obstacles: FloatArray, clear_road: FloatArray,
+                      safety_margin: float, road_margin: float, kappa_max: float
+                      ) -> tuple[Violation, ...]:
+    """The worst sample of each limit that the samples break (see :func:`broken_limits`):
+    ``s`` [m] arc lengths, ``xy`` ``(n, 2)`` centres [m], clearances [m], curvature [1/m]."""
+    masks = broken_limits(curvature, clear_obstacles, clear_road, safety_margin,
+                          road_margin, kappa_max)
+    out = []
+    for kind, bad, worst, value, limit in (
+            ("obstacle", masks[0], np.argmin, clear_obstacles, safety_margin),
+            ("road", masks[1], np.argmin, clear_road, road_margin),
+            ("curvature", masks[2], np.argmax, np.abs(curvature), kappa_max)):
+        if np.any(bad):
+            j = int(worst(value))
+            out.append(Violation(kind, float(value[j]), float(limit), float(s[j]),
+                                 float(xy[j, 0]), float(xy[j, 1])))
+    return tuple(out)
+
+
+def broken_limits(curvature: FloatArray, clear_obstacles: FloatArray, clear_road: FloatArray,
+                  safety_margin: float, road_margin: float, kappa_max: float
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per sample, with level 3's tolerance for rounding: the footprint within the safety
+    margin [m] of an obstacle, within the road margin [m] of a road edge, and the
+    curvature [1/m] over ``kappa_max``."""
+    return (clear_obstacles < safety_margin - 1e-6, clear_road < road_margin - 1e-6,
+            np.abs(curvature) > kappa_max * (1.0 + 1e-6))
+
+
+def _worst_of(violations: tuple[Violation, ...]) -> tuple[Violation, ...]:
+    """One violation per kind, the worst, in the order obstacle, road, curvature."""
+    best: dict[str, Violation] = {}
+    for v in violations:
+        old = best.get(v.kind)
+        if old is None or ((v.value > old.value) if v.kind == "curvature"
+                           else (v.value < old.value)):
+            best[v.kind] = v
+    return tuple(best[k] for k in ("obstacle", "road", "curvature") if k in best)
 
 
 def _times(s: FloatArray, v: FloatArray) -> FloatArray:

@@ -127,6 +127,29 @@ def test_plan_command_writes_trajectory_plan_and_picture(
     assert png.stat().st_size > 10_000
 
 
+def test_plan_command_says_which_limit_an_infeasible_plan_breaks_and_where(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The README's city example: a warning exactly when the plan is infeasible, one line
+    per broken limit (as plan.json lists them), each naming the station and the route's
+    edge or junction there."""
+    out = tmp_path / "plan"
+    rc = main(["plan", str(NETS / "city.net.xml"), "SWA0", "G1G2", "--out", str(out)])
+    err = capsys.readouterr().err
+    saved = json.loads((out / "plan.json").read_text())
+    found, route = saved["trajectory"]["violations"], saved["meta"]["route"]
+    assert rc == 0 and saved["trajectory"]["feasible"] == (not found)
+    if not found:
+        assert "not feasible" not in err
+        return
+    lines = err.strip().splitlines()
+    assert "not feasible" in lines[0]
+    assert len(lines) == 1 + min(len(found), 5) + (len(found) > 5)
+    for line, v in zip(lines[1:], found, strict=False):
+        assert v["kind"] in ("obstacle", "road", "curvature")
+        assert ("curvature" if v["kind"] == "curvature" else "footprint") in line
+        assert "station" in line and any(e in line for e in route)
+
+
 def test_plan_command_errors_are_one_line(tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
     rc = main(["plan", str(NETS / "straight.net.xml"), "e0", "e2", "--obstacles",

@@ -227,6 +227,46 @@ def test_infeasible_start_is_reported_not_hidden() -> None:
     assert (np.abs(tr.curvature).max() > TP.kappa_max
             or tr.clearance_obstacles.min() < tr.safety_margin
             or tr.clearance_road.min() < tr.road_margin)
+    assert_violations_say_why(tr, road, obstacles)
+
+
+def assert_violations_say_why(tr: Trajectory, corridor: Corridor, obstacles: Obstacles,
+                              rp: RoadmapParams | None = None) -> None:
+    """``violations`` is empty exactly when the trajectory is feasible, and each one is
+    true of the curve where it says: its point lies on the curve at its arc length, and
+    there the footprint by shapely comes within the margin it names (to within the
+    curve's change over a sample), or the curvature is beyond the limit."""
+    rp = rp or RoadmapParams()
+    assert tr.feasible == (not tr.violations)
+    base = box(-rp.vehicle_length / 2, -rp.vehicle_width / 2,
+               rp.vehicle_length / 2, rp.vehicle_width / 2)
+    for v in tr.violations:
+        assert 0.0 <= v.s <= tr.length + 1e-6
+        x, y, h, _ = tr.at_station(v.s)
+        assert np.hypot(x - v.x, y - v.y) < 0.05
+        fp = affinity.translate(affinity.rotate(base, float(h), origin=(0, 0),
+                                                use_radians=True), float(x), float(y))
+        if v.kind == "obstacle":
+            assert v.value < v.limit == tr.safety_margin
+            dist = min(fp.distance(Polygon(p)) for p in obstacles.polygons())
+            assert dist < v.limit + 0.05
+        elif v.kind == "road":
+            assert v.value < v.limit == tr.road_margin
+            road = Polygon(corridor.polygon())
+            assert fp.difference(road.buffer(-v.limit)).area > 0 or \
+                road.exterior.distance(fp) < v.limit + 0.05
+        else:
+            assert v.kind == "curvature" and v.value > v.limit == TP.kappa_max
+            # the curve itself, densely: a turn tighter than the limit within 0.5 m
+            # (the optimiser's samples can catch a peak between the trajectory's)
+            assert tr.spline is not None
+            u = np.linspace(0.0, 1.0, 20001)
+            near = np.hypot(*(tr.spline(u) - [v.x, v.y]).T) < 0.5
+            kappa = np.abs(curvature_from_derivatives(tr.spline(u[near], 1),
+                                                      tr.spline(u[near], 2)))
+            assert kappa.max() > v.limit
+        text = v.describe(corridor)
+        assert f"{v.s:.1f} m along" in text and "station" in text
 
 
 def kinked_lane(angle_deg: float, width: float = 3.2) -> tuple[Corridor, Polygon]:
@@ -300,7 +340,8 @@ def test_lane_corners_feasible_only_when_clear(angle: float, left: bool, width: 
                                               start: float, road_margin: float) -> None:
     """Random corners of one lane: a curve reported feasible keeps the road margin from
     the lane's edges by shapely, to within 0.05 m (the corridor holds the edges' offsets
-    every 0.5 m of its smoothed reference, which rounds a mitred corner off a little)."""
+    every 0.5 m of its smoothed reference, which rounds a mitred corner off a little); an
+    infeasible one says which limit it breaks, and where, truly."""
     corridor, lane = kinked_lane(angle if left else -angle, width)
     rp = RoadmapParams()
     rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, start]), rp)
@@ -308,6 +349,7 @@ def test_lane_corners_feasible_only_when_clear(angle: float, left: bool, width: 
                          TrajectoryParams(road_margin=road_margin), 0.0)
     if tr.feasible:
         assert lane_clearance(tr, corridor, lane, rp) >= road_margin - 0.05
+    assert_violations_say_why(tr, corridor, Obstacles.empty(), rp)
 
 
 @settings(max_examples=30, deadline=None)
@@ -595,6 +637,7 @@ def _random_fields(seed: int, n: int, curved: bool) -> bool | None:
         return None
     if tr.feasible:
         assert shapely_check_corridor(tr, cor, obs, rm.params) == (0, 0)
+    assert_violations_say_why(tr, cor, obs, rm.params)
     assert tr.min_speed_after >= tr.min_speed_before - 1e-9
     return tr.feasible
 
