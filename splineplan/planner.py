@@ -101,7 +101,8 @@ def plan_corridor(
     corridor, obstacles
         The route's drivable area and its obstacles.
     start_xy, start_heading
-        The vehicle's centre ``(2,)`` [m] and heading [rad] (``None``: along the roadmap).
+        The vehicle's centre ``(2,)`` [m] and heading [rad] (``None``: along the roadmap),
+        anywhere along the corridor: the plan covers the corridor from there on.
     roadmap_params, params
         Level-2 and level-3 parameters.
     start_speed, end_speed
@@ -117,6 +118,7 @@ def plan_corridor(
     rp = roadmap_params or RoadmapParams()
     tp = params or TrajectoryParams()
     overlap = min(SEGMENT_OVERLAP, rp.segment_length / 4.0)
+    corridor = _from_start(corridor, start_xy, rp, overlap)
     cuts = cut_stations(corridor, rp.segment_length, overlap)
     # a join's pose lies on a curve planned past it: no lead-in for its speed, which would
     # hold the next curve on the join's tangent for up to half the lead-in
@@ -189,6 +191,20 @@ def warm_up() -> None:
     road = Corridor.from_boundaries([[0.0, 3.5], [60.0, 3.5]], [[0.0, -3.5], [60.0, -3.5]])
     cars = Obstacles.from_boxes([[30.0, 1.5]], [0.0], 4.5, 1.8)
     plan_corridor(road, cars, [1.0, -1.5], 0.0)
+
+
+def _from_start(corridor: Corridor, start_xy: ArrayLike, rp: RoadmapParams, overlap: float
+                ) -> Corridor:
+    """The corridor from a vehicle length behind the start on, where the start lies beyond
+    its first segment (where the first segment would end behind or near the start); the
+    corridor itself otherwise, so that plans from its beginning keep their segments."""
+    start = np.asarray(start_xy, dtype=float).reshape(-1)
+    if start.shape != (2,) or not np.all(np.isfinite(start)):
+        return corridor  # level 2 says what is wrong with it
+    s0 = float(corridor.to_sl(start[None])[0, 0])
+    if s0 <= CUT_WINDOW * rp.segment_length - overlap or s0 >= corridor.length:
+        return corridor
+    return corridor.slice(s0 - rp.vehicle_length, corridor.length)
 
 
 def _infeasible_samples(tr: Trajectory, kappa_max: float) -> NDArray[np.bool_]:

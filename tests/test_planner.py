@@ -66,6 +66,22 @@ def test_long_curved_corridor_is_continuous_and_feasible() -> None:
             assert road.contains(fp)
 
 
+@pytest.mark.parametrize("station", [250.0, 420.0, 610.0])
+def test_a_start_far_along_the_corridor_plans_from_there(station: float) -> None:
+    """A vehicle that starts beyond the first segment (as after a replan far along a
+    route) gets a plan from its own position to the corridor's end: starting at its pose,
+    feasible on the parked-car arc (shapely), and as long as the rest of the corridor."""
+    cor, obs = curved_corridor()
+    rp = RoadmapParams()
+    start = cor.to_xy(np.array([station]), np.array([0.0]))[0]
+    plan = plan_corridor(cor, obs, start, float(cor.heading_at(station)), roadmap_params=rp)
+    tr = plan.trajectory
+    assert np.hypot(tr.x[0] - start[0], tr.y[0] - start[1]) < 1e-6
+    assert tr.feasible and footprint_violations(tr, cor, obs, rp) == (0, 0)
+    assert abs(tr.s[-1] - (cor.length - station)) < 0.05 * (cor.length - station)
+    assert all(cor.to_sl(rm.xy)[:, 0].min() >= station - 1e-6 for rm in plan.roadmaps)
+
+
 def footprint_violations(tr: Trajectory, cor: Corridor, obs: Obstacles, rp: RoadmapParams,
                          end_room: float = 4.0) -> tuple[int, int]:
     """Samples whose footprint (shapely) touches an obstacle grown by the safety margin, and
