@@ -41,6 +41,7 @@ from splineplan.trajectory import (
     Trajectory,
     TrajectoryParams,
     _times,
+    check_start_speed,
     plan_trajectory,
 )
 
@@ -82,7 +83,7 @@ class CorridorPlan:
 
 def plan_corridor(
     corridor: Corridor,
-    obstacles: Obstacles,
+    obstacles: Obstacles | None,
     start_xy: ArrayLike,
     start_heading: float | None,
     *,
@@ -97,7 +98,7 @@ def plan_corridor(
     Parameters
     ----------
     corridor, obstacles
-        The route's drivable area and its obstacles.
+        The route's drivable area and its obstacles (``None``: none).
     start_xy, start_heading
         The vehicle's centre ``(2,)`` [m] and heading [rad] (``None``: along the roadmap).
     roadmap_params, params
@@ -114,6 +115,8 @@ def plan_corridor(
     """
     rp = roadmap_params or RoadmapParams()
     tp = params or TrajectoryParams()
+    check_start_speed(start_speed, tp)  # before any planning
+    obstacles = Obstacles.empty() if obstacles is None else obstacles
     overlap = min(SEGMENT_OVERLAP, rp.segment_length / 4.0)
     cuts = cut_stations(corridor, rp.segment_length, overlap)
     # a join's pose lies on a curve planned past it: no lead-in for its speed, which would
