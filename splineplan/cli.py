@@ -219,7 +219,10 @@ def _xy_pair(text: str) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y in metres, got {text!r}") from None
+        x = y = math.nan
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(
+            f"expected X,Y in metres (two finite numbers), got {text!r}")
     return x, y
 
 
@@ -476,7 +479,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tiers", nargs="+", metavar="TIER",
                    help="only these tiers: bundled, empty, sparse, medium, dense, blocked")
     p.add_argument("--drivers", nargs="+", default=None, metavar="DRIVER",
-                   help="planner, sumo, sublane (all)")
+                   choices=("planner", "sumo", "sublane"), help="planner, sumo, sublane (all)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_bench)
 

@@ -406,11 +406,12 @@ def _no_width(s: FloatArray, left: FloatArray, right: FloatArray) -> str:
         return ("the corridor's left and right sides are swapped: the left side lies "
                 f"{right[i] - left[i]:.2f} m right of the right side at station {s[i]:.1f} m "
                 "(give the left boundary as left, both in the direction of travel)")
-    if left[i] < right[i]:
+    if np.any(left < right):
         j = i + int(np.argmax(~bad[i:])) if np.any(~bad[i:]) else len(s) - 1
+        k = int(np.argmax(right - left))
         return (f"the corridor's left and right sides cross at station {s[i]:.1f} m: the "
-                f"left side lies {right[i] - left[i]:.2f} m right of the right side from "
-                f"there to station {s[j]:.1f} m")
+                f"left side lies right of the right side from there to station {s[j]:.1f} m "
+                f"(by {right[k] - left[k]:.2f} m at station {s[k]:.1f} m)")
     return f"the corridor has no width at station {s[i]:.1f} m (its sides meet there)"
 
 

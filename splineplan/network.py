@@ -289,11 +289,31 @@ def load_network(path: str | Path) -> RoadNetwork:
     try:
         net = sumolib.net.readNet(str(p), withInternal=True, withFoes=False, maxcache=0)
     except Exception as err:  # sumolib raises whatever its XML parser raises
-        raise NetworkError(f"cannot read SUMO network {p}: {err}".splitlines()[0]) from err
+        root = _root_tag(p)
+        if root is not None and root != "net":
+            raise NetworkError(f"{p} is not a SUMO network: its root element is <{root}>, a "
+                               "network's is <net> (netconvert builds one)") from err
+        why = "it is not XML: " if root is None else ""
+        raise NetworkError(f"cannot read SUMO network {p}: {why}{err}".splitlines()[0]) from err
     try:
         return _from_sumolib(p, net)
     except (KeyError, ValueError, IndexError, AttributeError) as err:
         raise NetworkError(f"{p} is not a usable SUMO network: {err}") from err
+
+
+def _root_tag(path: Path) -> str | None:
+    """The root element's name of an XML file (gzipped or not), or ``None`` if it is not
+    XML."""
+    import gzip
+    import xml.etree.ElementTree as ET
+
+    try:
+        with (gzip.open(path) if path.suffix == ".gz" else path.open("rb")) as fh:
+            for _, el in ET.iterparse(fh, events=("start",)):
+                return str(el.tag)
+    except (ET.ParseError, OSError, EOFError):
+        return None
+    return None
 
 
 def _from_sumolib(path: Path, net: Any) -> RoadNetwork:
