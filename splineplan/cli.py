@@ -21,6 +21,10 @@ from splineplan.errors import OutputError, SplineplanError
 
 # ---- checks shared by the commands: numbers and output paths, before any work -----------
 
+#: Longest road [m] that ``plan-image`` plans across: ``--scale`` times the map's width in
+#: pixels (a mistyped scale of 1e6 m per pixel made a road of 4e8 m, and the process ran out of
+#: memory building it).
+MAX_MAP_LENGTH = 20_000.0
 #: Largest SUMO seed (a C int).
 MAX_SEED = 2**31 - 1
 #: Picture formats that ``--plot FILE`` may name (by its extension).
@@ -262,6 +266,7 @@ def _cmd_plan_image(args: argparse.Namespace) -> int:
     from splineplan.trajectory import TrajectoryParams
 
     out = _out_dir(args.out if args.out else f"{Path(args.map).stem}_plan")
+    _check_map_length(args.map, args.scale)
     amap = image_map(args.map, scale=args.scale, threshold=args.threshold,
                      merge_tolerance=args.merge_tolerance)
     params = TrajectoryParams()
@@ -297,6 +302,25 @@ def _cmd_plan_image(args: argparse.Namespace) -> int:
         print(f"splineplan plan-image: warning: the trajectory is not feasible: {why}",
               file=sys.stderr)
     return 0
+
+
+def _check_map_length(path: str, scale: float) -> None:
+    """Refuse a ``--scale`` that makes the map's road longer than :data:`MAX_MAP_LENGTH`
+    (read from the image's header; a file that is no image is left to the reader)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            width = im.size[0]
+    except (OSError, ValueError, Image.DecompressionBombError):
+        return  # image_map says what is wrong with the file
+    if width * scale > MAX_MAP_LENGTH:
+        from splineplan.errors import ParameterError
+
+        raise ParameterError(
+            f"--scale {scale:g} m per pixel makes the {width}-pixel-wide map "
+            f"{width * scale / 1000:.4g} km long; plan-image plans at most "
+            f"{MAX_MAP_LENGTH / 1000:g} km (is the scale in metres per pixel?)")
 
 
 def _add_plot(sub: argparse._SubParsersAction) -> None:

@@ -31,7 +31,8 @@ logger = logging.getLogger(__name__)
 MAX_START_OFFROAD = 3.0
 #: Sweep-line spacings [m] that a user's input may ask for (``plan --d``, a scenario's
 #: ``[roadmap] d``): finer lines take minutes and write hundreds of megabytes of plan.json
-#: for no better plan (0.001 m: 40 s and 268 MB); coarser ones step over the
+#: for no better plan (0.001 m on the 600 m straight network: 54 s, 2.8 GB of memory and a
+#: 235 MB plan.json, against 3 s and 2.4 MB at 0.1 m); coarser ones step over the
 #: lateral moves between obstacles. :class:`RoadmapParams` itself takes any positive d.
 D_RANGE = (0.1, 10.0)
 #: Numerical slack [m] of the clearance checks (free-interval ends lie exactly at the

@@ -166,6 +166,8 @@ CLI_CASES: list[tuple[list[str], str]] = [
     (["plan-image", MAP, "--out", "{out}", "--scale", "0"], "--scale: must be positive"),
     (["plan-image", MAP, "--out", "{out}", "--scale", "-0.25"], "--scale: must be positive"),
     (["plan-image", MAP, "--out", "{out}", "--scale", "nan"], "--scale: must be a finite"),
+    (["plan-image", MAP, "--out", "{out}", "--scale", "1e6"],
+     "--scale 1e+06 m per pixel makes the 400-pixel-wide map 4e+05 km long"),
     (["plan-image", MAP, "--out", "{out}", "--scale", ".25", "--threshold", "1.5"],
      "--threshold: must lie between 0 and 1"),
     (["plan-image", MAP, "--out", "{out}", "--scale", ".25", "--threshold", "0"],
