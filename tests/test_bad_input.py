@@ -422,3 +422,22 @@ def test_scenario_errors_name_the_file(tmp_path: Path) -> None:
     with pytest.raises(ScenarioError) as err:
         load_scenario(tmp_path / "twenty.toml")
     _one_line(err, f"{tmp_path / 'twenty.toml'}: [ego] ego.start_pos must be a number")
+
+
+def test_simulate_replaces_its_old_outputs(tmp_path: Path,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """A reused run folder loses the pictures of an earlier run (they would sit beside the
+    new run's as if they were its own), keeps other files, and gets the new run's status."""
+    scenario = tmp_path / "nowhere.toml"
+    scenario.write_text(GOOD_TOML.replace('goal_edge = "e2"', 'goal_edge = "nowhere"'))
+    out = tmp_path / "run"
+    (out / "plans").mkdir(parents=True)
+    stale = out / "plans" / "plan_000_t00000.0.png"
+    stale.write_bytes(b"stale")
+    (out / "route.png").write_bytes(b"stale")
+    (out / "notes.txt").write_text("mine")
+    assert _run(["simulate", str(scenario), "--out", str(out), "--no-progress"]) == 2
+    assert "edge 'nowhere'" in capsys.readouterr().err
+    assert not stale.exists() and not (out / "route.png").exists()
+    assert (out / "notes.txt").read_text() == "mine"
+    assert '"failed"' in (out / "metrics.json").read_text()
