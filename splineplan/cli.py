@@ -9,12 +9,160 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
+import os
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
+from pathlib import Path
 from typing import Any, NoReturn
 
 from splineplan import __version__
-from splineplan.errors import SplineplanError
+from splineplan.errors import OutputError, SplineplanError
+
+# ---- checks shared by the commands: numbers and output paths, before any work -----------
+
+#: Longest road [m] that ``plan-image`` plans across: ``--scale`` times the map's width in
+#: pixels (a mistyped scale of 1e6 m per pixel made a road of 4e8 m, and the process ran out of
+#: memory building it).
+MAX_MAP_LENGTH = 20_000.0
+#: Largest SUMO seed (a C int).
+MAX_SEED = 2**31 - 1
+#: Picture formats that ``--plot FILE`` may name (by its extension).
+PICTURE_FORMATS = ("png", "pdf", "svg", "svgz", "jpg", "jpeg", "tif", "tiff", "webp", "eps",
+                   "ps")
+
+
+def _float(text: str) -> float:
+    """A finite float, or an argparse error that says the value must be a number."""
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"must be a number, got {text!r}") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return x
+
+
+def _positive(text: str) -> float:
+    """A finite float above 0 (an argparse type)."""
+    x = _float(text)
+    if x <= 0:
+        raise argparse.ArgumentTypeError(f"must be positive, got {text!r}")
+    return x
+
+
+def _non_negative(text: str) -> float:
+    """A finite float, 0 or above (an argparse type)."""
+    x = _float(text)
+    if x < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text!r}")
+    return x
+
+
+def _int_in(low: int, high: int | None = None) -> Callable[[str], int]:
+    """An argparse type: an integer from ``low`` (to ``high``)."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"must be an integer, got {text!r}") from None
+        if n < low or (high is not None and n > high):
+            within = f">= {low}" if high is None else f"in {low}..{high}"
+            raise argparse.ArgumentTypeError(f"must be an integer {within}, got {text!r}")
+        return n
+    parse.__name__ = "integer"
+    return parse
+
+
+def _spacing(text: str) -> float:
+    """The sweep-line spacing ``--d`` [m], within :data:`splineplan.roadmap.D_RANGE` (an
+    argparse type)."""
+    from splineplan.roadmap import D_RANGE
+
+    x = _float(text)
+    lo, hi = D_RANGE
+    if not lo <= x <= hi:
+        raise argparse.ArgumentTypeError(
+            f"the sweep-line spacing must be between {lo:g} and {hi:g} m, got {text!r}")
+    return x
+
+
+def _threshold(text: str) -> float:
+    """A luminance threshold in (0, 1) (an argparse type)."""
+    x = _float(text)
+    if not 0.0 < x < 1.0:
+        raise argparse.ArgumentTypeError(f"must lie between 0 and 1, got {text!r}")
+    return x
+
+
+def _out_dir(path: str | Path, option: str = "--out") -> Path:
+    """The output folder ``path``, checked before any work: it is a folder, or can be made
+    one, and may be written; else :class:`OutputError` naming ``option``."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputError(f"{option} {p} is a file, not a folder")
+    _writable(p if p.exists() else _existing_parent(p, option), p, option)
+    return p
+
+
+def _out_file(path: str | Path, option: str = "--plot") -> Path:
+    """The picture file ``path``, checked before any work: not a folder, a known picture
+    format, and writable (its missing parent folders are made when it is written, by
+    :func:`_make_parent`); else :class:`OutputError` naming ``option``."""
+    p = Path(path)
+    if p.is_dir():
+        raise OutputError(f"{option} {p} is a folder; give a picture file, such as "
+                          f"{p / 'picture.png'}")
+    fmt = p.suffix[1:].lower()
+    if fmt not in PICTURE_FORMATS:
+        what = f"unknown picture format {p.suffix!r}" if fmt else "no picture extension"
+        raise OutputError(f"{option} {p} has {what}; use .png, .pdf or .svg")
+    _writable(p if p.exists() else _existing_parent(p, option), p, option)
+    return p
+
+
+def _existing_parent(p: Path, option: str) -> Path:
+    """The nearest folder above ``p`` that exists; an error if it is a file."""
+    q = p.parent
+    while not q.exists() and q != q.parent:
+        q = q.parent
+    if not q.is_dir():
+        raise OutputError(f"{option} {p}: {q} is a file, not a folder")
+    return q
+
+
+def _writable(q: Path, p: Path, option: str) -> None:
+    if not os.access(q, os.W_OK | (os.X_OK if q.is_dir() else 0)):
+        raise OutputError(f"{option} {p} cannot be written: {q} is not writable")
+
+
+def _make_parent(p: Path) -> Path:
+    """``p`` after making its parent folders (a picture's, as ``plan --plot`` does)."""
+    p.parent.mkdir(parents=True, exist_ok=True)
+    return p
+
+
+def _clear_outputs(out: Path, names: Iterable[str]) -> None:
+    """Remove from ``out`` the files an earlier run of the same command wrote (glob
+    ``names``), so that a reused folder holds only this run's outputs; nothing else in it
+    is touched."""
+    if not out.is_dir():
+        return
+    for name in names:
+        for f in out.glob(name):
+            if f.is_file():
+                f.unlink()
+
+
+#: What ``plan`` and ``plan-image`` write into their folder (and ``plot`` draws from it).
+_PLAN_OUTPUTS = ("plan.json", "trajectory.csv",
+                 *(f"{n}.{fmt}" for n in ("roadmap", "trajectory", "speed")
+                   for fmt in ("png", "pdf", "svg")))
+#: What ``simulate`` writes into its folder.
+_SIM_OUTPUTS = ("metrics.json", "trajectory.csv", "fcd.xml", "sumo.log", "run.log",
+                *(f"{n}.{fmt}" for n in ("route", "speed_time") for fmt in ("png", "pdf", "svg")),
+                "plans/plan_*.png")
+
 
 # ---- commands (one _add_/_cmd_ pair each; keep them in this order) ----------------------
 
@@ -30,9 +178,10 @@ def _add_route(sub: argparse._SubParsersAction) -> None:
                    help="minimise length [m] or travel time [s] (length)")
     p.add_argument("--avoid", nargs="+", default=[], metavar="EDGE",
                    help="edges the route must not use")
-    p.add_argument("--start-pos", type=float, default=0.0, metavar="M",
+    p.add_argument("--start-pos", type=_non_negative, default=0.0, metavar="M",
                    help="start position [m] along FROM_EDGE (0)")
-    p.add_argument("--plot", metavar="PNG", help="write a picture of the route on the network")
+    p.add_argument("--plot", metavar="PNG", help="write a picture of the route on the network "
+                   "(missing folders are made)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=_cmd_route)
 
@@ -43,14 +192,15 @@ def _cmd_route(args: argparse.Namespace) -> int:
     from splineplan.network import load_network
     from splineplan.route import shortest_route
 
+    picture = _out_file(args.plot) if args.plot else None
     net = load_network(args.net)
     route = shortest_route(net, args.from_edge, args.to_edge, vclass=args.vclass,
                            weight=args.weight, avoid=tuple(args.avoid),
                            start_pos=args.start_pos)
-    if args.plot:
+    if picture is not None:
         from splineplan.plot import plot_route
 
-        plot_route(net, route, path=args.plot)
+        plot_route(net, route, path=_make_parent(picture))
     unit = "m" if route.weight == "length" else "s"
     if args.json:
         print(json.dumps({
@@ -73,7 +223,10 @@ def _xy_pair(text: str) -> tuple[float, float]:
     try:
         x, y = (float(v) for v in text.split(","))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected X,Y in metres, got {text!r}") from None
+        x = y = math.nan
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise argparse.ArgumentTypeError(
+            f"expected X,Y in metres (two finite numbers), got {text!r}")
     return x, y
 
 
@@ -86,17 +239,18 @@ def _add_plan_image(sub: argparse._SubParsersAction) -> None:
                     "and write trajectory.csv (t, x, y, heading, speed, curvature, s), "
                     "plan.json and pictures to the output folder.")
     p.add_argument("map", metavar="MAP", help="map image (PNG or any format Pillow reads)")
-    p.add_argument("--scale", type=float, required=True, metavar="M",
+    p.add_argument("--scale", type=_positive, required=True, metavar="M",
                    help="size of a pixel [m] (metres per pixel)")
     p.add_argument("--start", type=_xy_pair, metavar="X,Y",
                    help="start [m] (default: the middle of the road on the left edge)")
     p.add_argument("--goal", type=_xy_pair, metavar="X,Y",
                    help="goal [m]: the plan ends on the sweep line through it "
                         "(default: the right edge)")
-    p.add_argument("--out", metavar="DIR", help="output folder (default: MAP's name + '_plan')")
-    p.add_argument("--threshold", type=float, default=0.5,
+    p.add_argument("--out", metavar="DIR", help="output folder (default: MAP's name + '_plan'); "
+                   "its earlier plan files and pictures are replaced")
+    p.add_argument("--threshold", type=_threshold, default=0.5,
                    help="luminance in (0, 1) from which a pixel is road (0.5)")
-    p.add_argument("--merge-tolerance", type=int, default=0, metavar="PIXELS",
+    p.add_argument("--merge-tolerance", type=_int_in(0), default=0, metavar="PIXELS",
                    help="merge obstacle rows whose ends differ by at most this many pixels "
                         "(fewer, slightly larger obstacles; 0 = pixel-exact)")
     p.add_argument("--no-plot", action="store_true", help="write no pictures")
@@ -111,12 +265,14 @@ def _cmd_plan_image(args: argparse.Namespace) -> int:
     from splineplan.io import save_plan
     from splineplan.trajectory import TrajectoryParams
 
+    out = _out_dir(args.out if args.out else f"{Path(args.map).stem}_plan")
+    _check_map_length(args.map, args.scale)
     amap = image_map(args.map, scale=args.scale, threshold=args.threshold,
                      merge_tolerance=args.merge_tolerance)
     params = TrajectoryParams()
     plan = plan_image(amap, start=args.start, goal=args.goal, params=params)
-    out = Path(args.out) if args.out else Path(f"{Path(args.map).stem}_plan")
     tr = plan.trajectory
+    _clear_outputs(out, _PLAN_OUTPUTS)
     save_plan(out, corridor=plan.corridor, obstacles=amap.obstacles, roadmaps=plan.roadmaps,
               trajectory=tr, trajectory_params=params,
               meta={"source": "image", "map": str(Path(args.map).resolve()),
@@ -155,6 +311,25 @@ def _report_infeasible(command: str, trajectory: Any, corridor: Any) -> None:
               file=sys.stderr)
 
 
+def _check_map_length(path: str, scale: float) -> None:
+    """Refuse a ``--scale`` that makes the map's road longer than :data:`MAX_MAP_LENGTH`
+    (read from the image's header; a file that is no image is left to the reader)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            width = im.size[0]
+    except (OSError, ValueError, Image.DecompressionBombError):
+        return  # image_map says what is wrong with the file
+    if width * scale > MAX_MAP_LENGTH:
+        from splineplan.errors import ParameterError
+
+        raise ParameterError(
+            f"--scale {scale:g} m per pixel makes the {width}-pixel-wide map "
+            f"{width * scale / 1000:.4g} km long; plan-image plans at most "
+            f"{MAX_MAP_LENGTH / 1000:g} km (is the scale in metres per pixel?)")
+
+
 def _add_plot(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "plot", help="draw the figures of a plan or simulation folder",
@@ -163,24 +338,33 @@ def _add_plot(sub: argparse._SubParsersAction) -> None:
                     "(Fig. 4) and the speed profile; with metrics.json (a simulation run), "
                     "the route on the network (Fig. 3) and the driven path coloured by speed.")
     p.add_argument("run_dir", metavar="RUN_DIR", help="folder holding plan.json or metrics.json")
-    p.add_argument("--out", metavar="DIR", help="where to write the pictures (RUN_DIR)")
+    p.add_argument("--out", metavar="DIR", help="where to write the pictures (RUN_DIR; "
+                   "missing folders are made)")
     p.add_argument("--format", default="png", choices=("png", "pdf", "svg"),
                    help="picture format (png)")
     p.set_defaults(func=_cmd_plot)
 
 
 def _cmd_plot(args: argparse.Namespace) -> int:
+    import json
     from pathlib import Path
 
     from splineplan.errors import ScenarioError
 
     run = Path(args.run_dir)
-    out = Path(args.out) if args.out else run
+    if not run.is_dir():
+        raise ScenarioError(f"RUN_DIR {run} " + ("is a file, not a folder" if run.exists()
+                                                 else "not found"))
+    out = _out_dir(args.out) if args.out else _out_dir(run, "RUN_DIR")
     from splineplan.plot import plot_plan_folder, plot_run_folder
 
     if (run / "plan.json").exists():
         written = plot_plan_folder(run, out_dir=out, fmt=args.format)
     elif (run / "metrics.json").exists():
+        try:
+            json.loads((run / "metrics.json").read_text())
+        except (UnicodeDecodeError, json.JSONDecodeError) as err:
+            raise ScenarioError(f"{run / 'metrics.json'} is not readable JSON: {err}") from err
         written = plot_run_folder(run, out_dir=out, fmt=args.format)
     else:
         raise ScenarioError(f"{run} holds neither plan.json nor metrics.json")
@@ -195,10 +379,12 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
                     "the ego vehicle; write metrics.json, trajectory.csv and fcd.xml.")
     p.add_argument("scenario", help="scenario file (.toml)")
     p.add_argument("--out", default=None,
-                   help="output folder (default: runs/<scenario name>)")
+                   help="output folder (default: runs/<scenario name>); its earlier run "
+                        "files and pictures are replaced")
     p.add_argument("--plot", action="store_true", help="also draw the route and each plan")
     p.add_argument("--gui", action="store_true", help="watch in sumo-gui (through traci)")
-    p.add_argument("--seed", type=int, default=None, help="SUMO's random seed")
+    p.add_argument("--seed", type=_int_in(0, MAX_SEED), default=None,
+                   help="SUMO's random seed (an integer >= 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--driver", choices=("planner", "sumo", "sublane"), default="planner",
                    help="who drives the ego: the planner (default), SUMO's lane-based "
@@ -212,8 +398,10 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     from splineplan.scenario import load_scenario
     from splineplan.sim import simulate
 
+    given = _out_dir(args.out) if args.out else None
     scenario = load_scenario(args.scenario)
-    out = Path(args.out) if args.out else Path("runs") / scenario.name
+    out = given or _out_dir(Path("runs") / scenario.name)
+    _clear_outputs(out, _SIM_OUTPUTS)
     result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
                       progress=False if args.no_progress else None, driver=args.driver)
     m = result.metrics
@@ -236,15 +424,19 @@ def _add_plan(sub: argparse._SubParsersAction) -> None:
     p.add_argument("to_edge", metavar="TO_EDGE")
     p.add_argument("--obstacles", metavar="FILE",
                    help="SUMO additional/route file: <poly> shapes and vehicles with a <stop>")
-    p.add_argument("--out", metavar="DIR", default="plan", help="output folder (plan)")
-    p.add_argument("--plot", metavar="PNG", help="picture of road, obstacles, roadmap and curve")
+    p.add_argument("--out", metavar="DIR", default="plan",
+                   help="output folder (plan); its earlier plan files and pictures are replaced")
+    p.add_argument("--plot", metavar="PNG", help="picture of road, obstacles, roadmap and curve "
+                   "(missing folders are made)")
     p.add_argument("--vclass", default="passenger", help="SUMO vehicle class (passenger)")
     p.add_argument("--weight", choices=("length", "time"), default="length")
     p.add_argument("--avoid", nargs="+", default=[], metavar="EDGE", help="edges not to use")
-    p.add_argument("--start-pos", type=float, default=0.0, metavar="M",
+    p.add_argument("--start-pos", type=_non_negative, default=0.0, metavar="M",
                    help="start position [m] along FROM_EDGE")
-    p.add_argument("--s-max", type=float, default=None, metavar="M/S", help="maximum speed")
-    p.add_argument("--d", type=float, default=None, metavar="M", help="sweep-line spacing")
+    p.add_argument("--s-max", type=_positive, default=None, metavar="M/S",
+                   help="maximum speed [m/s]")
+    p.add_argument("--d", type=_spacing, default=None, metavar="M",
+                   help="sweep-line spacing [m], 0.1 to 10 (1)")
     p.set_defaults(func=_cmd_plan)
 
 
@@ -259,8 +451,16 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     from splineplan.roadmap import RoadmapParams
     from splineplan.trajectory import TrajectoryParams
 
+    out = _out_dir(args.out)
+    picture = _out_file(args.plot) if args.plot else None
     net = load_network(args.net)
     obstacles = read_obstacles(net, args.obstacles) if args.obstacles else Obstacles.empty()
+    if args.obstacles:
+        print(f"obstacles: {len(obstacles)} read from {args.obstacles}")
+        if not len(obstacles):
+            print(f"splineplan plan: warning: {args.obstacles} holds no obstacles (no <poly> "
+                  "shapes, no vehicles with a <stop> on a lane): planning on an empty road",
+                  file=sys.stderr)
     rp = RoadmapParams() if args.d is None else RoadmapParams(d=args.d)
     tp = TrajectoryParams()
     if args.s_max is not None:
@@ -268,16 +468,17 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     result = plan(net, args.from_edge, args.to_edge, obstacles, start_pos=args.start_pos,
                   vclass=args.vclass, weight=args.weight, avoid=args.avoid,
                   roadmap_params=rp, trajectory_params=tp)
-    out = Path(args.out)
     tr = result.trajectory
+    _clear_outputs(out, _PLAN_OUTPUTS)
     save_plan(out, corridor=result.corridor, obstacles=obstacles, roadmaps=list(result.roadmaps),
               trajectory=tr, trajectory_params=tp,
               meta={"source": "network", "network": str(Path(args.net).resolve()),
                     "route": list(result.route.edges), "blocked": list(result.blocked)})
-    if args.plot:
+    if picture is not None:
         from splineplan.plot import plot_trajectory
 
-        plot_trajectory(tr, result.corridor, obstacles, list(result.roadmaps), path=args.plot)
+        plot_trajectory(tr, result.corridor, obstacles, list(result.roadmaps),
+                        path=_make_parent(picture))
     print(f"route: {' '.join(result.route.edges)} ({result.route.length:.1f} m)")
     if result.blocked:
         print(f"closed and avoided: {' '.join(result.blocked)}")
@@ -301,8 +502,8 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
                                    "driver; write runs.csv, runs.json, summary.md and figures.")
     p.add_argument("suite", metavar="SUITE", nargs="?", default="default",
                    help="default, quick, fields, a scenario file or a folder of them (default)")
-    p.add_argument("--seeds", type=int, default=1, metavar="N", help="seeds 0..N-1 (1)")
-    p.add_argument("--workers", type=int, default=None, metavar="N",
+    p.add_argument("--seeds", type=_int_in(1), default=1, metavar="N", help="seeds 0..N-1 (1)")
+    p.add_argument("--workers", type=_int_in(1), default=None, metavar="N",
                    help="runs at a time on this machine (default: number of cores)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
                    help="run on a Dask cluster instead (needs splineplan[dask])")
@@ -310,7 +511,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tiers", nargs="+", metavar="TIER",
                    help="only these tiers: bundled, empty, sparse, medium, dense, blocked")
     p.add_argument("--drivers", nargs="+", default=None, metavar="DRIVER",
-                   help="planner, sumo, sublane (all)")
+                   choices=("planner", "sumo", "sublane"), help="planner, sumo, sublane (all)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_bench)
 
@@ -318,6 +519,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
 def _cmd_bench(args: argparse.Namespace) -> int:
     from splineplan.bench import DRIVERS, build_suite, run_suite, summarise
 
+    _out_dir(args.out)
     cases = build_suite(args.suite, seeds=args.seeds, tiers=args.tiers, out_dir=args.out)
     res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
                     workers=args.workers, scheduler=args.scheduler,
@@ -339,18 +541,29 @@ def _cmd_bench(args: argparse.Namespace) -> int:
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are one line (argparse would print the usage too),
     and which takes SUMO's edge ids that start with a minus (the reverse direction of an
-    edge, ``-1511#1``) as values, not as options."""
+    edge, ``-1511#1``) as values, not as options.
+
+    An argument with a single minus is an option only when it is one of the parser's short
+    options (``-h``, ``-v``) or repeats one flag (``-vv``); anything else (``-1511#1``,
+    ``-SWA0``) is a value. The commands also take the top-level ``-v`` (``splineplan route
+    -v NET A B``).
+    """
 
     def error(self, message: str) -> NoReturn:
         print(f"{self.prog}: error: {message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(2)
 
     def _parse_optional(self, arg_string: str) -> Any:
-        # a single minus followed by anything but an option of this parser: a value
         if (arg_string.startswith("-") and not arg_string.startswith("--")
-                and len(arg_string) > 1 and arg_string[:2] not in self._option_string_actions):
+                and len(arg_string) > 1 and not self._short_option(arg_string)):
             return None
         return super()._parse_optional(arg_string)
+
+    def _short_option(self, arg: str) -> bool:
+        """Whether ``arg`` is a short option of this parser, or a flag repeated (``-vv``)."""
+        return arg in self._option_string_actions or (
+            len(set(arg[1:])) == 1 and arg[:2] in self._option_string_actions
+            and self._option_string_actions[arg[:2]].nargs == 0)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -367,6 +580,9 @@ def build_parser() -> argparse.ArgumentParser:
     for name, add in sorted(_registry().items()):
         add(sub)
         del name
+    for command in sub.choices.values():  # -v after the command too, as before it
+        command.add_argument("-v", "--verbose", action="count", default=argparse.SUPPRESS,
+                             help="log more (-v info, -vv debug)")
     return parser
 
 
@@ -396,6 +612,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args))
     except SplineplanError as err:
         print(f"splineplan {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except OSError as err:  # a file that could not be read or written after the checks
+        what = f"{err.strerror}: {err.filename}" if err.filename else str(err)
+        print(f"splineplan {args.command}: error: {what}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"splineplan {args.command}: interrupted", file=sys.stderr)

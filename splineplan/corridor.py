@@ -87,10 +87,7 @@ class Corridor:
         if len(self.reference) < 2 or self.s[-1] <= 0:
             raise GeometryError("corridor needs a reference line of positive length")
         if np.any(self.left <= self.right):
-            i = int(np.argmax(self.left <= self.right))
-            raise GeometryError(
-                f"corridor has no width at station {self.offset + self.s[i]:.1f} m"
-            )
+            raise GeometryError(_no_width(self.s + self.offset, self.left, self.right))
         if len(self.edges) != len(self.edge_starts):
             raise GeometryError("corridor needs one start station per edge")
         if len(self.edge_ends) not in (0, len(self.edges)):
@@ -399,6 +396,23 @@ def _project_kernel(px: FloatArray, py: FloatArray, nearest: NDArray[np.int64],
                 out[j, 0] = st[i] + along
                 out[j, 1] = lat
     return out
+
+
+def _no_width(s: FloatArray, left: FloatArray, right: FloatArray) -> str:
+    """Why a corridor with ``left <= right`` somewhere has no room, and where."""
+    bad = left <= right
+    i = int(np.argmax(bad))
+    if np.all(left < right):
+        return ("the corridor's left and right sides are swapped: the left side lies "
+                f"{right[i] - left[i]:.2f} m right of the right side at station {s[i]:.1f} m "
+                "(give the left boundary as left, both in the direction of travel)")
+    if np.any(left < right):
+        j = i + int(np.argmax(~bad[i:])) if np.any(~bad[i:]) else len(s) - 1
+        k = int(np.argmax(right - left))
+        return (f"the corridor's left and right sides cross at station {s[i]:.1f} m: the "
+                f"left side lies right of the right side from there to station {s[j]:.1f} m "
+                f"(by {right[k] - left[k]:.2f} m at station {s[k]:.1f} m)")
+    return f"the corridor has no width at station {s[i]:.1f} m (its sides meet there)"
 
 
 def _as_polyline(points: ArrayLike, what: str) -> FloatArray:

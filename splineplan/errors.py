@@ -82,18 +82,34 @@ class SimulationError(SplineplanError):
     """SUMO failed to start, or the simulation could not go on."""
 
 
+class OutputError(SplineplanError):
+    """An output file or folder cannot be written (a file where a folder is wanted, no
+    permission, an unknown picture format)."""
+
+
 def require_positive(name: str, value: object) -> None:
     """Raise :class:`ParameterError` unless ``value`` is a finite number above 0."""
-    x = _finite(value)
-    if x is None or x <= 0:
+    x = _number(name, value)
+    if x <= 0:
         raise ParameterError(f"{name} must be positive, got {value!r}")
 
 
 def require_non_negative(name: str, value: object) -> None:
     """Raise :class:`ParameterError` unless ``value`` is a finite number, 0 or above."""
-    x = _finite(value)
-    if x is None or x < 0:
+    x = _number(name, value)
+    if x < 0:
         raise ParameterError(f"{name} must be >= 0, got {value!r}")
+
+
+def _number(name: str, value: object) -> float:
+    """``value`` as a float, or a :class:`ParameterError` that says it must be a (finite)
+    number: a string or a list is not "below 0", it is not a number at all."""
+    x = _finite(value)
+    if x is None:
+        if isinstance(value, Real) and not isinstance(value, bool):
+            raise ParameterError(f"{name} must be a finite number, got {value!r}")
+        raise ParameterError(f"{name} must be a number, got {value!r}")
+    return x
 
 
 def _finite(value: object) -> float | None:

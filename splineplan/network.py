@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import itertools
 import logging
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -288,11 +289,31 @@ def load_network(path: str | Path) -> RoadNetwork:
     try:
         net = sumolib.net.readNet(str(p), withInternal=True, withFoes=False, maxcache=0)
     except Exception as err:  # sumolib raises whatever its XML parser raises
-        raise NetworkError(f"cannot read SUMO network {p}: {err}".splitlines()[0]) from err
+        root = _root_tag(p)
+        if root is not None and root != "net":
+            raise NetworkError(f"{p} is not a SUMO network: its root element is <{root}>, a "
+                               "network's is <net> (netconvert builds one)") from err
+        why = "it is not XML: " if root is None else ""
+        raise NetworkError(f"cannot read SUMO network {p}: {why}{err}".splitlines()[0]) from err
     try:
         return _from_sumolib(p, net)
     except (KeyError, ValueError, IndexError, AttributeError) as err:
         raise NetworkError(f"{p} is not a usable SUMO network: {err}") from err
+
+
+def _root_tag(path: Path) -> str | None:
+    """The root element's name of an XML file (gzipped or not), or ``None`` if it is not
+    XML."""
+    import gzip
+    import xml.etree.ElementTree as ET
+
+    try:
+        with (gzip.open(path) if path.suffix == ".gz" else path.open("rb")) as fh:
+            for _, el in ET.iterparse(fh, events=("start",)):
+                return str(el.tag)
+    except (ET.ParseError, OSError, EOFError):
+        return None
+    return None
 
 
 def _from_sumolib(path: Path, net: Any) -> RoadNetwork:
@@ -1134,16 +1155,26 @@ def read_obstacles(network: RoadNetwork, path: str | Path) -> Obstacles:
         root = ET.parse(p).getroot()
     except ET.ParseError as err:
         raise NetworkError(f"cannot read obstacle file {p}: {err}") from err
+    if root.tag == "net":
+        raise NetworkError(f"obstacle file {p} is a SUMO network, not an additional or route "
+                           "file with <poly> shapes or stopped vehicles")
     polys: list[FloatArray] = []
     ids: list[str] = []
     for el in root.iter("poly"):
+        pid = el.get("id", f"poly{len(ids)}")
         try:
             pts = np.array([[float(v) for v in xy.split(",")[:2]]
-                            for xy in el.get("shape", "").split()])
+                            for xy in el.get("shape", "").split()], dtype=float).reshape(-1, 2)
         except ValueError as err:
-            raise GeometryError(f"{p}: polygon '{el.get('id')}' has a bad shape") from err
+            raise GeometryError(f"{p}: polygon '{pid}' has a bad shape "
+                                f"{el.get('shape', '')[:40]!r} (x,y pairs of numbers "
+                                "expected)") from err
+        try:
+            Obstacles.from_polygons([pts], [pid])
+        except GeometryError as err:
+            raise GeometryError(f"{p}: {err}") from err
         polys.append(pts)
-        ids.append(el.get("id", f"poly{len(ids)}"))
+        ids.append(pid)
     vtypes = {el.get("id"): el for el in root.iter("vType")}
     lanes = {ln.id: ln for lns in network.lanes for ln in lns}
     pos: list[FloatArray] = []
@@ -1152,26 +1183,26 @@ def read_obstacles(network: RoadNetwork, path: str | Path) -> Obstacles:
     widths: list[float] = []
     vids: list[str] = []
     for veh in root.iter("vehicle"):
+        vid = veh.get("id", f"vehicle{len(vids)}")
         for stop in veh.iter("stop"):
             lane_id = stop.get("lane")
             if lane_id is None:
                 continue
             if lane_id not in lanes:
-                raise NetworkError(f"{p}: vehicle '{veh.get('id')}' stops on unknown lane "
+                raise NetworkError(f"{p}: vehicle '{vid}' stops on unknown lane "
                                    f"'{lane_id}'")
             lane = lanes[lane_id]
             vt = vtypes.get(veh.get("type", ""))
-            length = float(vt.get("length", SUMO_DEFAULT_LENGTH)) if vt is not None \
-                else SUMO_DEFAULT_LENGTH
-            width = float(vt.get("width", SUMO_DEFAULT_WIDTH)) if vt is not None \
-                else SUMO_DEFAULT_WIDTH
-            end = float(stop.get("endPos", lane.length))
+            where = f"{p}: vehicle '{vid}'"
+            length = _positive_attr(vt, "length", SUMO_DEFAULT_LENGTH, f"{where}'s vType")
+            width = _positive_attr(vt, "width", SUMO_DEFAULT_WIDTH, f"{where}'s vType")
+            end = _float_attr(stop, "endPos", lane.length, f"{where}'s stop")
             xy, h = _lane_point(lane, end)
             pos.append(xy)
             head.append(h)
             lengths.append(length)
             widths.append(width)
-            vids.append(veh.get("id", f"vehicle{len(vids)}"))
+            vids.append(vid)
             break  # a vehicle stands at its first stop
     obstacles = Obstacles.from_polygons(polys, ids) if polys else Obstacles.empty()
     if pos:
@@ -1179,6 +1210,28 @@ def read_obstacles(network: RoadNetwork, path: str | Path) -> Obstacles:
             np.array(pos), np.array(head), np.array(lengths), np.array(widths),
             reference="front", ids=vids)
     return obstacles
+
+
+def _float_attr(el: Any, name: str, default: float, where: str) -> float:
+    """Attribute ``name`` of an XML element as a finite float (``default`` if absent)."""
+    text = None if el is None else el.get(name)
+    if text is None:
+        return default
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value):
+        raise NetworkError(f"{where}: {name} must be a number, got {text!r}")
+    return value
+
+
+def _positive_attr(el: Any, name: str, default: float, where: str) -> float:
+    """As :func:`_float_attr`, and above 0."""
+    value = _float_attr(el, name, default, where)
+    if value <= 0:
+        raise NetworkError(f"{where}: {name} must be positive, got {value:g}")
+    return value
 
 
 def _lane_point(lane: Lane, pos: float) -> tuple[FloatArray, float]:

@@ -77,18 +77,22 @@ class Obstacles:
         """Obstacles from a list of polygons, each ``(k, 2)`` [m] with k >= 3, open or closed."""
         rings = []
         for i, poly in enumerate(polygons):
-            p = np.asarray(poly, dtype=float)
+            name = f"'{ids[i]}'" if ids is not None and i < len(ids) else str(i)
+            try:
+                p = np.asarray(poly, dtype=float)
+            except (TypeError, ValueError) as err:
+                raise GeometryError(f"obstacle {name} is not an array of numbers") from err
             if p.ndim != 2 or p.shape[1] != 2:
-                raise GeometryError(f"obstacle {i} must be a (k, 2) array, got {p.shape}")
+                raise GeometryError(f"obstacle {name} must be a (k, 2) array, got {p.shape}")
             if not np.all(np.isfinite(p)):
-                raise GeometryError(f"obstacle {i} has non-finite coordinates")
+                raise GeometryError(f"obstacle {name} has non-finite coordinates")
             if len(p) > 3 and np.allclose(p[0], p[-1]):
                 p = p[:-1]
             if len(p) < 3:
-                raise GeometryError(f"obstacle {i} needs at least 3 vertices, got {len(p)}")
+                raise GeometryError(f"obstacle {name} needs at least 3 vertices, got {len(p)}")
             area2 = np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])
             if abs(area2) < 1e-12:
-                raise GeometryError(f"obstacle {i} has zero area")
+                raise GeometryError(f"obstacle {name} has zero area")
             rings.append(p if area2 > 0 else p[::-1])
         if not rings:
             return cls.empty() if not ids else cls._fail_ids(ids)

@@ -42,6 +42,7 @@ from splineplan.trajectory import (
     TrajectoryParams,
     _times,
     broken_limits,
+    check_start_speed,
     plan_trajectory,
     sample_violations,
 )
@@ -84,7 +85,7 @@ class CorridorPlan:
 
 def plan_corridor(
     corridor: Corridor,
-    obstacles: Obstacles,
+    obstacles: Obstacles | None,
     start_xy: ArrayLike,
     start_heading: float | None,
     *,
@@ -99,7 +100,7 @@ def plan_corridor(
     Parameters
     ----------
     corridor, obstacles
-        The route's drivable area and its obstacles.
+        The route's drivable area and its obstacles (``None``: none).
     start_xy, start_heading
         The vehicle's centre ``(2,)`` [m] and heading [rad] (``None``: along the roadmap),
         anywhere along the corridor: the plan covers the corridor from there on.
@@ -117,6 +118,8 @@ def plan_corridor(
     """
     rp = roadmap_params or RoadmapParams()
     tp = params or TrajectoryParams()
+    check_start_speed(start_speed, tp)  # before any planning
+    obstacles = Obstacles.empty() if obstacles is None else obstacles
     overlap = min(SEGMENT_OVERLAP, rp.segment_length / 4.0)
     corridor = _from_start(corridor, start_xy, rp, overlap)
     cuts = cut_stations(corridor, rp.segment_length, overlap)

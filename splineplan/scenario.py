@@ -39,10 +39,11 @@ from typing import Any
 from splineplan.errors import (
     ParameterError,
     ScenarioError,
+    SplineplanError,
     require_non_negative,
     require_positive,
 )
-from splineplan.roadmap import RoadmapParams
+from splineplan.roadmap import D_RANGE, RoadmapParams
 
 #: Keys of the ``[roadmap]`` section that come from the ``[ego]`` section instead.
 _EGO_DIMENSIONS = ("vehicle_length", "vehicle_width")
@@ -90,14 +91,22 @@ class EgoSpec:
     def __post_init__(self) -> None:
         for name in ("start_edge", "goal_edge", "vclass", "id"):
             if not isinstance(getattr(self, name), str) or not getattr(self, name):
-                raise ParameterError(f"ego.{name} must be a non-empty string")
+                raise ParameterError(f"ego.{name} must be a non-empty string, "
+                                     f"got {getattr(self, name)!r}")
+        from splineplan.network import check_vclass
+
+        try:
+            check_vclass(self.vclass)
+        except SplineplanError as err:
+            raise ParameterError(f"ego.vclass: {err}") from err
         for name in ("length", "width", "max_speed"):
             require_positive(f"ego.{name}", getattr(self, name))
         for name in ("start_pos", "depart"):
             require_non_negative(f"ego.{name}", getattr(self, name))
         if self.goal_pos is not None:
             require_non_negative("ego.goal_pos", self.goal_pos)
-        if not isinstance(self.start_lane, int) or self.start_lane < 0:
+        if (isinstance(self.start_lane, bool) or not isinstance(self.start_lane, int)
+                or self.start_lane < 0):
             raise ParameterError(f"ego.start_lane must be an integer >= 0, got {self.start_lane!r}")
 
 
@@ -146,8 +155,10 @@ class SimParams:
                      "deviation_tolerance", "time_gap", "min_gap", "stopped_speed"):
             require_positive(f"sim.{name}", getattr(self, name))
         require_non_negative("sim.goal_margin", self.goal_margin)
-        if not isinstance(self.seed, int):
-            raise ParameterError(f"sim.seed must be an integer, got {self.seed!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or not (
+                0 <= self.seed < 2**31):
+            raise ParameterError(f"sim.seed must be an integer in 0..{2**31 - 1}, "
+                                 f"got {self.seed!r}")
         if self.replan_distance >= self.lookahead:
             raise ParameterError("sim.replan_distance must be below sim.lookahead")
 
@@ -250,6 +261,9 @@ def scenario_from_dict(
     roadmap_raw["vehicle_length"] = ego.length
     roadmap_raw["vehicle_width"] = ego.width
     roadmap = _build(RoadmapParams, roadmap_raw, where, "roadmap")
+    if "d" in roadmap_raw and not D_RANGE[0] <= roadmap.d <= D_RANGE[1]:
+        raise ScenarioError(f"{where}: [roadmap] d, the sweep-line spacing, must be between "
+                            f"{D_RANGE[0]:g} and {D_RANGE[1]:g} m, got {roadmap.d:g}")
 
     from splineplan.trajectory import TrajectoryParams
 
@@ -318,7 +332,7 @@ def _build(cls: Any, raw: Mapping[str, Any], where: str, section: str) -> Any:
             kwargs[f.name] = value
     try:
         return cls(**kwargs)
-    except (ParameterError, TypeError, ValueError) as err:
+    except (SplineplanError, TypeError, ValueError) as err:
         raise ScenarioError(f"{where}: [{section}] {err}") from err
 
 

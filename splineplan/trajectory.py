@@ -68,6 +68,7 @@ the parameters in :mod:`splineplan.trajectory_params` and the curvature in
 from __future__ import annotations
 
 import logging
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -282,7 +283,7 @@ class Trajectory:
 def plan_trajectory(
     roadmap: Roadmap,
     corridor: Corridor,
-    obstacles: Obstacles,
+    obstacles: Obstacles | None,
     params: TrajectoryParams | None = None,
     start_heading: float | None = None,
     *,
@@ -299,14 +300,16 @@ def plan_trajectory(
         vehicle's size and safety margin.
     corridor, obstacles
         The road segment and the obstacles the roadmap was planned among (the real ones:
-        the footprint is checked against them with the safety margin).
+        the footprint is checked against them with the safety margin); ``None``: none.
     params
         Level-3 parameters (defaults if ``None``).
     start_heading
         Vehicle heading [rad] at ``roadmap.start_xy``; ``None`` starts towards the first
         control point after the lead-in.
     start_speed
-        Speed [m/s] at the start.
+        Speed [m/s] at the start, from 0 to ``params.s_max``: a vehicle already faster than
+        it may drive is an error, not a plan that silently starts slower. Below ``s_max``
+        but above what the curve ahead allows, the profile starts at what it allows.
     end_speed
         Speed [m/s] at the end: 0 stops there, ``None`` keeps going as fast as allowed.
     polish
@@ -317,11 +320,12 @@ def plan_trajectory(
     Raises
     ------
     TrajectoryError
-        Fewer than two distinct roadmap points, or a start off the road.
+        Fewer than two distinct roadmap points, a start off the road, or a start speed
+        below 0 or above ``params.s_max``.
     """
     params = params or TrajectoryParams()
-    if not (np.isfinite(start_speed) and start_speed >= 0):
-        raise TrajectoryError(f"start speed must be >= 0, got {start_speed!r}")
+    check_start_speed(start_speed, params)
+    obstacles = Obstacles.empty() if obstacles is None else obstacles
     if not polish:
         params = replace(params, max_iterations=0, repair_rounds=0)
     smooth = _sharp_bend(roadmap, corridor, params)
@@ -344,6 +348,25 @@ def plan_trajectory(
                        end_speed)
     log.debug("level 2's path gives no feasible curve; detour feasible: %s", other.feasible)
     return _less_violating(traj, other, params)
+
+
+def check_start_speed(start_speed: float, params: TrajectoryParams) -> None:
+    """Raise :class:`TrajectoryError` unless ``start_speed`` [m/s] is a number from 0 to
+    ``params.s_max`` (rounding allowed)."""
+    try:
+        v = float(start_speed)
+    except (TypeError, ValueError):
+        raise TrajectoryError(f"start_speed must be a number, got {start_speed!r}") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise TrajectoryError(f"start_speed must be >= 0 m/s, got {start_speed!r}")
+    if v > params.s_max + _SPEED_TOL:
+        raise TrajectoryError(
+            f"start_speed {v:.2f} m/s exceeds TrajectoryParams.s_max ({params.s_max:.2f} "
+            "m/s), the most the vehicle may drive; raise s_max or start slower")
+
+
+#: Rounding [m/s] allowed above ``s_max`` in a start speed (a closed loop's speed read back).
+_SPEED_TOL = 1e-6
 
 
 def _violation(tr: Trajectory, params: TrajectoryParams) -> tuple[float, float]:

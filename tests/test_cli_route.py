@@ -36,7 +36,6 @@ def test_route_json_and_plot(tmp_path: Path, capsys: pytest.CaptureFixture[str])
     (["route", CITY, "nowhere", "G1G2"], "'nowhere'"),
     (["route", CITY, "SWA0", "G1G2", "--vclass", "car"], "'car'"),
     (["route", CITY, "SWA0", "G1G2", "--avoid", "bridge_east"], "bridge_east"),
-    (["route", CITY, "SWA0", "G1G2", "--start-pos", "-3"], "start_pos"),
     (["route", CITY, "SWA0", "bus_B1C2"], "bus_B1C2"),
     # an edge id with a leading minus is an edge id, not an option
     (["route", CITY, "-SWA0", "G1G2"], "'-SWA0'"),
@@ -54,6 +53,7 @@ def test_route_errors_are_one_line(args: list[str], needle: str,
     ["route", CITY, "SWA0", "G1G2", "--weight", "fuel"],
     ["route", CITY, "SWA0"],
     ["route", CITY, "SWA0", "G1G2", "--start-pos", "x"],
+    ["route", CITY, "SWA0", "G1G2", "--start-pos", "-3"],
 ])
 def test_argument_errors_are_one_line(args: list[str],
                                       capsys: pytest.CaptureFixture[str]) -> None:

@@ -133,6 +133,7 @@ def test_plot_command_redraws_from_files(tmp_path: Path,
                                                      "trajectory.png"]
     for w in written:
         assert Path(w).stat().st_size > 10_000
+    (tmp_path / "nothing").mkdir()
     assert main(["plot", str(tmp_path / "nothing")]) == 2
     assert "neither plan.json nor metrics.json" in capsys.readouterr().err
 
