@@ -202,13 +202,18 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from splineplan.errors import Interrupted
     from splineplan.scenario import load_scenario
     from splineplan.sim import simulate
 
     scenario = load_scenario(args.scenario)
     out = Path(args.out) if args.out else Path("runs") / scenario.name
-    result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
-                      progress=False if args.no_progress else None, driver=args.driver)
+    try:
+        result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
+                          progress=False if args.no_progress else None, driver=args.driver)
+    except Interrupted as stop:  # Ctrl-C: the record up to then is written
+        print(f"splineplan simulate: {stop}", file=sys.stderr)
+        return 130
     m = result.metrics
     print(f"{scenario.name}: {result.status}: {result.reason}")
     print(f"  travel time {m['travel_time'] or 0:.1f} s, distance {m['distance']:.1f} m, "
