@@ -313,21 +313,27 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from splineplan.bench import DRIVERS, build_suite, run_suite, summarise
+    from splineplan.bench import DRIVERS, build_suite, exit_status, run_suite, summarise
+    from splineplan.errors import Interrupted
 
     cases = build_suite(args.suite, seeds=args.seeds, tiers=args.tiers, out_dir=args.out)
-    res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
-                    workers=args.workers, scheduler=args.scheduler,
-                    progress=not args.no_progress)
+    try:
+        res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
+                        workers=args.workers, scheduler=args.scheduler,
+                        progress=not args.no_progress)
+    except Interrupted as stop:  # Ctrl-C: the finished runs are written
+        print(f"splineplan bench: {stop}", file=sys.stderr)
+        return 130
     for s in summarise(res.rows):
-        print(f"{s['tier']:>8} {s['driver']:>8}: {s['arrived']}/{s['runs']} arrived")
+        print(f"{s['tier']:>8} {s['driver']:>8}: {s['safe']}/{s['runs']} arrived safely "
+              f"({s['arrived']} arrived, {s['collisions']} collisions)")
     failed = [r for r in res.rows if r["error"]]
     for r in failed:
         print(f"failed: {r['case']} ({r['driver']}): {r['error']}")
     print(f"{len(res.cases)} cases, {len(res.rows)} runs in {res.wall_time:.1f} s on "
           f"{res.executor}: {res.cases_per_minute:.1f} cases/min")
     print(f"written to {args.out}/ (runs.csv, runs.json, summary.md, figures)")
-    return 0
+    return exit_status(res.rows)
 
 
 # ---- end of commands --------------------------------------------------------------------
