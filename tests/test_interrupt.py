@@ -54,10 +54,12 @@ def _check_run_folder(run: Path) -> dict[str, object]:
     assert "interrupted" in m["reason"]
     with (run / "trajectory.csv").open(newline="") as fh:
         rows = list(csv.DictReader(fh))
-    if rows:
-        assert float(rows[-1]["t"]) == pytest.approx(m["sim_time_end"])
-    steps = ET.parse(run / "fcd.xml").getroot().findall("timestep")  # complete XML
-    assert steps and float(steps[-1].get("time", "nan")) <= m["sim_time_end"] + 1e-6
+    if rows:  # the last step observed: the one reached, or the one before (Ctrl-C came
+        # between SUMO's step and the loop's look at it)
+        assert 0.0 <= m["sim_time_end"] - float(rows[-1]["t"]) <= m["step_length"] + 1e-6
+    if m["sim_time_end"] or (run / "fcd.xml").is_file():  # SUMO had started
+        steps = ET.parse(run / "fcd.xml").getroot().findall("timestep")  # complete XML
+        assert steps and float(steps[-1].get("time", "nan")) <= m["sim_time_end"] + 1e-6
     plot = subprocess.run([sys.executable, "-m", "splineplan.cli", "plot", str(run)],
                           cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
     assert plot.returncode == 0, plot.stderr

@@ -230,7 +230,7 @@ def test_sumo_log_has_no_false_alarms_for_the_ego(runs: dict[str, SimResult], na
                                                   ) -> None:
     """SUMO's log says "emergency braking" for the ego only where the closed loop braked at
     its emergency limit (twice b_max, the ego's emergencyDecel in SUMO), never with the
-    decelerations of 10 to 75 m/s^2 SUMO inferred from the moves before; an "implied speed"
+    decelerations of 9 to 37 m/s^2 SUMO inferred from the moves before; an "implied speed"
     above the maximum at most once: SUMO measures a move along its lane's length, which
     on a curved junction lane differs from the distance the ego moved beside the lane's
     centre line (README, Conventions)."""
