@@ -298,8 +298,8 @@ def _simulate(run: _Run, scenario: Scenario, *, plot: bool) -> SimResult:
         with sigint_ignored():
             run.interrupt()
             result = run.finish(plot=False)
-        raise Interrupted(f"{scenario.name}: interrupted at t={run.time:.1f} s; the record up "
-                          f"to then is in {run.out}", result) from err
+        raise Interrupted(f"{scenario.name}: interrupted {run.when()}; the record up to "
+                          f"then is in {run.out}", result) from err
     except SplineplanError as err:
         run.fail(err)
         run.finish(plot=plot)
@@ -1484,8 +1484,15 @@ class _Run:
         """The user stopped the run (Ctrl-C)."""
         self.status = "interrupted"
         where = "" if self.depart_time is None else f" at station {self.station:.1f} m"
-        self.reason = (f"interrupted by the user (Ctrl-C) at t={self.time:.1f} s{where}"
+        self.reason = (f"interrupted by the user (Ctrl-C) {self.when()}{where}"
                        + (f" (before: {self.reason})" if self.reason else ""))
+
+    def when(self) -> str:
+        """The simulation time reached, in words."""
+        if self.sumo_started or self.time > 0.0:
+            return f"at t={self.time:.1f} s"
+        return "before the simulation started"
+
 
     def finish(self, *, plot: bool) -> SimResult:
         # SUMO may be running without sumo_started set, when Ctrl-C came as it started
