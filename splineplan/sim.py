@@ -16,7 +16,9 @@ of a headless SUMO run:
 4. move the ego with ``vehicle.moveToXY(..., keepRoute=3)``: SUMO's position is the middle
    of the front bumper and its angle is in degrees, 0 = north, clockwise; ``keepRoute=3``
    keeps the exact x, y (bit 2) and maps the vehicle onto its route only (bit 1), which is
-   kept equal to the planned route with ``vehicle.setRoute``;
+   kept equal to the planned route with ``vehicle.setRoute``; its speed is set to the
+   closed loop's with ``vehicle.setSpeed`` (SUMO would infer one from the move, measured
+   along its lanes and capped by their speed limits: jumps at every lane boundary);
 5. check that SUMO put the ego where asked, and check the ego's footprint against every
    other vehicle's footprint and against the road (SUMO's own collision check runs too, with
    ``--collision.action warn``; nothing is teleported: ``--time-to-teleport -1``).
