@@ -14,7 +14,10 @@ or a shared file system). Rows come back sorted by case and driver, so that the 
 not depend on the executor; all randomness comes from the seeds.
 
 Outputs: ``runs.csv`` and ``runs.json`` (one row per run), ``summary.md`` (a table by
-difficulty tier and driver) and figures (:func:`splineplan.plot.plot_bench`).
+difficulty tier and driver; a success is a safe arrival: no collision, no time off the
+road) and figures (:func:`splineplan.plot.plot_bench`). Ctrl-C stops the suite at once:
+the runs not started are cancelled, those in hand write their partial records, and the
+three files are written for the runs that finished.
 """
 
 from __future__ import annotations
