@@ -14,23 +14,28 @@ or a shared file system). Rows come back sorted by case and driver, so that the 
 not depend on the executor; all randomness comes from the seeds.
 
 Outputs: ``runs.csv`` and ``runs.json`` (one row per run), ``summary.md`` (a table by
-difficulty tier and driver) and figures (:func:`splineplan.plot.plot_bench`).
+difficulty tier and driver; a success is a safe arrival: no collision, no time off the
+road) and figures (:func:`splineplan.plot.plot_bench`). Ctrl-C stops the suite at once:
+the runs not started are cancelled, those in hand write their partial records, and the
+three files are written for the runs that finished.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import logging
 import math
 import os
+import signal
 import subprocess
 import sys
 import threading
 import time
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor, as_completed
+from collections.abc import Callable, Generator, Mapping, Sequence
+from concurrent.futures import ThreadPoolExecutor, as_completed, wait
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -38,7 +43,8 @@ from typing import Any
 import numpy as np
 
 from splineplan import fields as fld
-from splineplan.errors import ParameterError
+from splineplan._signals import sigint_ignored
+from splineplan.errors import Interrupted, ParameterError
 
 log = logging.getLogger(__name__)
 
@@ -83,10 +89,16 @@ TIMING_FIELDS = ("wall_time", "wall_planner", "wall_sumo", "wall_loop", "plan_ti
                  "plan_time_max", "plan_time_total")
 #: Row fields that depend on where the outputs went.
 PLACE_FIELDS = ("run_dir",)
-#: Columns of ``runs.csv``, in order.
+#: Seconds a Ctrl-C gives the runs in hand to write their partial outputs before their
+#: processes are killed.
+STOP_GRACE = 5.0
+#: Columns of ``runs.csv``, in order. ``arrived``: the ego reached its goal; ``safe``: it
+#: arrived without a collision (the closed loop's footprint check) and without time off
+#: the road, what the summary counts as a success.
 COLUMNS = ("index", "case", "driver", "tier", "road", "density", "obstacles", "seed",
-           "status", "arrived", "reason", "error", "travel_time", "distance",
-           "min_clearance", "min_clearance_sim", "collisions", "teleports", "replans",
+           "status", "arrived", "safe", "reason", "error", "travel_time", "distance",
+           "min_clearance", "min_clearance_sim", "collisions", "time_off_road", "teleports",
+           "replans",
            *TIMING_FIELDS, "run_dir")
 
 
@@ -142,6 +154,8 @@ class BenchResult:
         ``local (N workers)`` or ``dask (ADDRESS)``.
     files
         Files written (``runs.csv``, ``runs.json``, ``summary.md``, figures).
+    interrupted
+        Whether Ctrl-C stopped the suite: ``rows`` are then the runs that had finished.
     """
 
     rows: list[dict[str, Any]]
@@ -150,11 +164,30 @@ class BenchResult:
     wall_time: float
     executor: str
     files: tuple[str, ...] = field(default=())
+    interrupted: bool = False
+
+    @property
+    def runs_planned(self) -> int:
+        """Runs of the suite: every case with every driver."""
+        return len(self.cases) * len(self.drivers)
+
+    @property
+    def cases_done(self) -> int:
+        """Cases whose runs (every driver) all finished."""
+        per: dict[int, int] = {}
+        for r in self.rows:
+            per[r["index"]] = per.get(r["index"], 0) + 1
+        return sum(1 for n in per.values() if n >= len(self.drivers))
+
+    @property
+    def cases_not_run(self) -> int:
+        """Cases of which no run finished (none, unless interrupted)."""
+        return len(self.cases) - len({r["index"] for r in self.rows})
 
     @property
     def cases_per_minute(self) -> float:
         """Throughput: cases (each with all its drivers) per minute of wall time."""
-        return 60.0 * len(self.cases) / self.wall_time if self.wall_time > 0 else math.inf
+        return 60.0 * self.cases_done / self.wall_time if self.wall_time > 0 else math.inf
 
     @property
     def runs_per_minute(self) -> float:
@@ -315,8 +348,9 @@ def _row_head(case: BenchCase, driver: str, run_dir: Path) -> dict[str, Any]:
     row.update({"index": case.index, "case": case.name, "driver": driver, "tier": case.tier,
                 "road": case.road, "density": None if math.isnan(case.density)
                 else round(case.density, 4), "obstacles": case.obstacles, "seed": case.seed,
-                "status": "failed", "arrived": False, "reason": "", "error": "",
-                "collisions": 0, "teleports": 0, "replans": 0, "run_dir": str(run_dir)})
+                "status": "failed", "arrived": False, "safe": False, "reason": "",
+                "error": "", "collisions": 0, "teleports": 0, "replans": 0,
+                "run_dir": str(run_dir)})
     return row
 
 
@@ -331,12 +365,17 @@ def _row_metrics(m: Mapping[str, Any], status: str, reason: str) -> dict[str, An
     loop = _num(m.get("wall_time_loop"))
     clear = [c for c in (_num(m.get("min_clearance_obstacles")),
                          _num(m.get("min_clearance_vehicles"))) if c is not None]
-    return {"status": status, "arrived": status == "arrived", "reason": reason,
+    collisions = int(m.get("collisions") or 0)
+    off_road = _num(m.get("time_off_road"))
+    arrived = status == "arrived"
+    return {"status": status, "arrived": arrived,
+            "safe": arrived and collisions == 0 and not off_road, "reason": reason,
             "travel_time": _round(_num(m.get("travel_time")), 3) if status == "arrived"
             else None,
             "distance": _round(_num(m.get("distance")), 3),
             "min_clearance_sim": _round(min(clear), 4) if clear else None,
-            "collisions": int(m.get("collisions") or 0),
+            "collisions": collisions,
+            "time_off_road": _round(off_road, 3),
             "teleports": int(m.get("teleports") or 0),
             "replans": int(m.get("replan_count") or 0),
             "wall_time": wall, "wall_planner": planner, "wall_sumo": sumo, "wall_loop": loop,
@@ -345,7 +384,7 @@ def _row_metrics(m: Mapping[str, Any], status: str, reason: str) -> dict[str, An
 
 
 def _row_failed(run_dir: Path, err: BaseException, wall: float) -> dict[str, Any]:
-    out: dict[str, Any] = {"status": "failed", "arrived": False,
+    out: dict[str, Any] = {"status": "failed", "arrived": False, "safe": False,
                            "error": f"{type(err).__name__}: {err}".splitlines()[0][:500],
                            "wall_time": wall}
     mfile = run_dir / "metrics.json"
@@ -433,12 +472,54 @@ def _vtype_dims(scenario: Any) -> dict[str, tuple[float, float]]:
 
 # ---- executors ----------------------------------------------------------------------------
 
-def execute_task(task: Mapping[str, Any], *, timeout: float = 1800.0) -> dict[str, Any]:
+class _Processes:
+    """The worker processes a local pool has running, so that Ctrl-C can stop them."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._live: set[subprocess.Popen[str]] = set()
+        self.stopping = False
+
+    def start(self, cmd: list[str], **kwargs: Any) -> subprocess.Popen[str] | None:
+        """Start a process, unless the pool is stopping (then ``None``)."""
+        with self._lock:
+            if self.stopping:
+                return None
+            proc = subprocess.Popen(cmd, **kwargs)
+            self._live.add(proc)
+            return proc
+
+    def done(self, proc: subprocess.Popen[str]) -> None:
+        with self._lock:
+            self._live.discard(proc)
+
+    def interrupt(self) -> None:
+        """Start no more processes; Ctrl-C (SIGINT) to those running, so that each closes
+        SUMO and writes the partial record of its run."""
+        with self._lock:
+            self.stopping = True
+            live = list(self._live)
+        for proc in live:
+            with contextlib.suppress(OSError):  # already gone
+                proc.send_signal(signal.SIGINT if os.name == "posix" else signal.SIGTERM)
+
+    def kill(self) -> None:
+        with self._lock:
+            live = list(self._live)
+        for proc in live:
+            with contextlib.suppress(OSError):
+                proc.kill()
+
+
+def execute_task(task: Mapping[str, Any], *, timeout: float = 1800.0,
+                 processes: _Processes | None = None) -> dict[str, Any]:
     """Run one task in a fresh Python process (``python -m splineplan.bench TASK.json``).
 
     The row comes back through ``row.json`` in the run folder; a process that dies without
     writing it gives a failed row with the end of its error output. This function is what
-    every executor calls (a thread of the local pool, a Dask worker).
+    every executor calls (a thread of the local pool, a Dask worker). The process runs in
+    a session of its own, so that a Ctrl-C in the terminal reaches only the suite, which
+    stops its runs itself (``processes``, the local pool's).
     """
     run_dir = Path(task["run_dir"])
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -450,14 +531,27 @@ def execute_task(task: Mapping[str, Any], *, timeout: float = 1800.0) -> dict[st
     pkg_root = str(Path(__file__).resolve().parent.parent)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (pkg_root, env.get("PYTHONPATH")) if p)
     t0 = time.perf_counter()
+    cmd = [sys.executable, "-m", "splineplan.bench", str(task_file)]
+    kwargs: dict[str, Any] = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE,
+                              "text": True, "env": env,
+                              "start_new_session": os.name == "posix"}
+    proc = (processes.start(cmd, **kwargs) if processes is not None
+            else subprocess.Popen(cmd, **kwargs))
+    if proc is None:  # the suite is stopping
+        row = _row_head(BenchCase(**task["case"]), str(task["driver"]), run_dir)
+        row["error"] = row["reason"] = "not run: the suite was interrupted"
+        return row
     try:
-        proc = subprocess.run([sys.executable, "-m", "splineplan.bench", str(task_file)],
-                              capture_output=True, text=True, timeout=timeout, env=env,
-                              check=False)
-        detail = (proc.stderr or proc.stdout or "").strip().splitlines()
+        stdout, stderr = proc.communicate(timeout=timeout)
+        detail = (stderr or stdout or "").strip().splitlines()
         code: int | str = proc.returncode
     except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
         detail, code = [f"the run took longer than {timeout:g} s"], "timeout"
+    finally:
+        if processes is not None:
+            processes.done(proc)
     wall = time.perf_counter() - t0
     if row_file.is_file():
         row = json.loads(row_file.read_text())
@@ -473,7 +567,10 @@ def execute_task(task: Mapping[str, Any], *, timeout: float = 1800.0) -> dict[st
 
 def _worker_main(argv: Sequence[str]) -> int:
     task = json.loads(Path(argv[0]).read_text())
-    row = run_one(task)
+    try:
+        row = run_one(task)
+    except KeyboardInterrupt:  # the suite stops: the run wrote its partial record
+        return 130
     Path(task["run_dir"], "row.json").write_text(json.dumps(row, indent=1, allow_nan=False))
     return 0
 
@@ -484,19 +581,39 @@ def _tasks(cases: Sequence[BenchCase], drivers: Sequence[str],
             for c in cases for d in drivers]
 
 
-def _local(tasks: list[dict[str, Any]], workers: int,
-           started: Callable[[int], None]) -> Iterator[tuple[int, dict[str, Any]]]:
-    def job(i: int) -> dict[str, Any]:
-        started(i)
-        return execute_task(tasks[i])
+#: Rows as the runs finish: (index of the task, row).
+_Rows = Generator[tuple[int, dict[str, Any]], None, None]
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(job, i): i for i in range(len(tasks))}
+
+def _local(tasks: list[dict[str, Any]], workers: int,
+           started: Callable[[int], None]) -> _Rows:
+    """Rows as the runs finish, from a pool of threads that each run one process at a
+    time. When the consumer stops (Ctrl-C), the runs not started are cancelled and those
+    running get :data:`STOP_GRACE` seconds to write their partial records."""
+    processes = _Processes()
+
+    def job(i: int) -> dict[str, Any]:
+        if not processes.stopping:
+            started(i)
+        return execute_task(tasks[i], processes=processes)
+
+    pool = ThreadPoolExecutor(max_workers=workers)
+    futures = {pool.submit(job, i): i for i in range(len(tasks))}
+    try:
         for fut in as_completed(futures):
             yield futures[fut], fut.result()
+    finally:
+        with sigint_ignored():  # a second Ctrl-C must not leave the processes running
+            processes.interrupt()
+            pool.shutdown(wait=False, cancel_futures=True)
+            # a cancelled future never counts as done for wait(): wait for the others
+            _, late = wait([f for f in futures if not f.cancelled()], timeout=STOP_GRACE)
+            if late:
+                processes.kill()
+                wait(late, timeout=STOP_GRACE)
 
 
-def _dask(tasks: list[dict[str, Any]], address: str) -> Iterator[tuple[int, dict[str, Any]]]:
+def _dask(tasks: list[dict[str, Any]], address: str) -> _Rows:
     try:
         from distributed import Client
         from distributed import as_completed as dask_completed
@@ -507,6 +624,7 @@ def _dask(tasks: list[dict[str, Any]], address: str) -> Iterator[tuple[int, dict
         client = Client(address, timeout=30)
     except (OSError, TimeoutError) as err:
         raise ParameterError(f"cannot reach the Dask scheduler at {address}: {err}") from err
+    futures: list[Any] = []
     try:
         futures = [client.submit(execute_task, t, pure=False, key=f"bench-{i}-{t['driver']}-"
                                  f"{t['case']['name']}") for i, t in enumerate(tasks)]
@@ -521,6 +639,9 @@ def _dask(tasks: list[dict[str, Any]], address: str) -> Iterator[tuple[int, dict
                 row["error"] = row["reason"] = f"Dask task failed: {type(err).__name__}: {err}"
             yield i, row
     finally:
+        pending = [f for f in futures if not f.done()]
+        if pending:  # stopped early (Ctrl-C): no more runs on the cluster
+            client.cancel(pending)
         client.close()
 
 
@@ -540,6 +661,14 @@ def run_suite(
     ``workers``: processes at a time on this machine (default: the number of cores);
     ``scheduler``: a Dask scheduler's address (``tcp://HOST:PORT``) instead. ``progress``:
     a progress bar on stderr naming the case in hand.
+
+    Raises
+    ------
+    Interrupted
+        Ctrl-C (``KeyboardInterrupt``): the runs not started are cancelled, those running
+        stopped (each writes its partial record in its run folder), and ``runs.csv``,
+        ``runs.json`` and ``summary.md`` of the runs that had finished are written (no
+        figures); the exception's ``result`` is the :class:`BenchResult`.
     """
     bad = [d for d in drivers if d not in DRIVERS]
     if bad or not drivers:
@@ -549,6 +678,8 @@ def run_suite(
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     tasks = _tasks(cases, drivers, out.resolve())
+    for t in tasks:  # a row of an earlier suite in the same folder is not one of this one
+        Path(t["run_dir"], "row.json").unlink(missing_ok=True)
     n_workers = workers or os.cpu_count() or 1
     executor = f"dask ({scheduler})" if scheduler else f"local ({n_workers} workers)"
     bar = _bar(len(tasks)) if progress else None
@@ -567,6 +698,7 @@ def run_suite(
     rows: list[dict[str, Any] | None] = [None] * len(tasks)
     t0 = time.perf_counter()
     stream = _dask(tasks, scheduler) if scheduler else _local(tasks, n_workers, started)
+    interrupted = False
     try:
         for i, row in stream:
             rows[i] = row
@@ -577,15 +709,48 @@ def run_suite(
                     bar.set_postfix_str(", ".join(list(running.values())[:3]))
                     bar.update(1)
             log.info("%s: %s %s", label(i), row["status"], row.get("error") or "")
+    except KeyboardInterrupt:
+        interrupted = True
     finally:
         if bar is not None:
             bar.close()
-    wall = time.perf_counter() - t0
+    if interrupted:
+        with sigint_ignored():  # stop the runs in hand, write what has finished
+            stream.close()
+            _finished_since(tasks, rows)
+            result = _result(rows, cases, drivers, time.perf_counter() - t0, executor,
+                             out, plots=False, interrupted=True)
+        raise Interrupted(f"interrupted after {len(result.rows)} of {result.runs_planned} "
+                          f"runs; runs.csv, runs.json and summary.md of those are in {out}",
+                          result)
+    return _result(rows, cases, drivers, time.perf_counter() - t0, executor, out,
+                   plots=plots)
+
+
+def _finished_since(tasks: Sequence[Mapping[str, Any]], rows: list[dict[str, Any] | None]
+                    ) -> None:
+    """Fill in the rows of the runs that finished after the last row was taken in (a run
+    writes ``row.json`` only when it has finished; an interrupted one writes none)."""
+    for i, task in enumerate(tasks):
+        row_file = Path(task["run_dir"]) / "row.json"
+        if rows[i] is None and row_file.is_file():
+            try:
+                rows[i] = json.loads(row_file.read_text())
+            except (OSError, ValueError):
+                continue
+
+
+def _result(rows: Sequence[dict[str, Any] | None], cases: Sequence[BenchCase],
+            drivers: Sequence[str], wall: float, executor: str, out: Path, *, plots: bool,
+            interrupted: bool = False) -> BenchResult:
+    """The finished rows, sorted by case and driver, written out."""
     done = [r for r in rows if r is not None]
     done.sort(key=lambda r: (r["index"], drivers.index(r["driver"])))
-    result = BenchResult(done, tuple(cases), tuple(drivers), wall, executor)
+    result = BenchResult(done, tuple(cases), tuple(drivers), wall, executor,
+                         interrupted=interrupted)
     files = write_outputs(result, out, plots=plots)
-    return BenchResult(done, tuple(cases), tuple(drivers), wall, executor, tuple(files))
+    return BenchResult(done, tuple(cases), tuple(drivers), wall, executor, tuple(files),
+                       interrupted=interrupted)
 
 
 def _bar(total: int) -> Any:
@@ -603,10 +768,13 @@ def comparable(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
 
 
 def summarise(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
-    """Per tier and driver: runs, arrivals, success rate, clearance and travel time.
+    """Per tier and driver: runs, arrivals, safe arrivals, success rate, clearance and
+    travel time.
 
-    Clearance [m] (``min_clearance``, from SUMO's floating car data) is over every run
-    that met another vehicle; travel time [s] over the runs that arrived.
+    A success is a safe arrival (``safe``: arrived, no collision, no time off the road):
+    an ego that reaches its goal through other cars has not done its job. Clearance [m]
+    (``min_clearance``, from SUMO's floating car data) is over every run that met another
+    vehicle; travel time [s] over the runs that arrived.
     """
     tiers: list[str] = []
     drivers: list[str] = []
@@ -624,12 +792,13 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             if not sel:
                 continue
             arrived = [r for r in sel if r["arrived"]]
+            safe = [r for r in arrived if r.get("safe")]
             clear = [float(r["min_clearance"]) for r in sel if r["min_clearance"] is not None]
             travel = [float(r["travel_time"]) for r in arrived if r["travel_time"] is not None]
             dens = [float(r["density"]) for r in sel if r["density"] is not None]
             out.append({
                 "tier": t, "driver": d, "runs": len(sel), "arrived": len(arrived),
-                "success_rate": len(arrived) / len(sel),
+                "safe": len(safe), "success_rate": len(safe) / len(sel),
                 "density": float(np.mean(dens)) if dens else None,
                 "clearance_mean": float(np.mean(clear)) if clear else None,
                 "clearance_median": float(np.median(clear)) if clear else None,
@@ -641,6 +810,17 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def exit_status(rows: Sequence[Mapping[str, Any]]) -> int:
+    """The ``bench`` command's exit status: 1 when a planner run failed with an error
+    (the planner or the closed loop broke, not the scenario's difficulty) or when no run
+    at all arrived safely (nothing worked), else 0."""
+    if any(r["driver"] == "planner" and r["status"] == "failed" for r in rows):
+        return 1
+    if not any(r.get("safe") for r in rows):
+        return 1
+    return 0
+
+
 def fmt(value: Any, digits: int) -> str:
     """A number as the summary table writes it (``-`` for none)."""
     return "-" if value is None else f"{float(value):.{digits}f}"
@@ -648,9 +828,16 @@ def fmt(value: Any, digits: int) -> str:
 
 def summary_markdown(result: BenchResult) -> str:
     """The Markdown summary: a table by tier and driver, throughput and failures."""
-    lines = ["# Scenario bench", "",
-             f"{len(result.cases)} cases x {len(result.drivers)} drivers "
-             f"({', '.join(result.drivers)}) = {len(result.rows)} runs; executor "
+    lines = ["# Scenario bench", ""]
+    if result.interrupted:
+        partly = len({r["index"] for r in result.rows}) - result.cases_done
+        lines += [f"**Interrupted** (Ctrl-C) after {len(result.rows)} of "
+                  f"{result.runs_planned} runs: {result.cases_not_run} of "
+                  f"{len(result.cases)} cases did not run"
+                  + (f" and {partly} ran with only some of the drivers" if partly else "")
+                  + ". The tables hold the runs that finished.", ""]
+    lines += [f"{len(result.cases)} cases x {len(result.drivers)} drivers "
+             f"({', '.join(result.drivers)}) = {result.runs_planned} runs; executor "
              f"{result.executor}; wall time {result.wall_time:.1f} s; "
              f"{result.cases_per_minute:.1f} cases/min ({result.runs_per_minute:.1f} runs/min).",
              "",
@@ -659,15 +846,17 @@ def summary_markdown(result: BenchResult) -> str:
              "record and the same computation for every driver (the closed loop's own "
              "`min_clearance_sim` uses the planned pose for the planner and SUMO's pose for "
              "SUMO's drivers; the two agree within centimetres). Travel time: "
-             "runs that arrived. Density: stopped vehicles per 100 m of road.", "",
-             "| tier | density [1/100 m] | driver | runs | arrived | success | "
+             "runs that arrived. Density: stopped vehicles per 100 m of road. Safe: "
+             "arrived without a collision and without time off the road; success is the "
+             "share of safe arrivals.", "",
+             "| tier | density [1/100 m] | driver | runs | arrived | safe | success | "
              "clearance mean [m] | clearance median [m] | travel time mean [s] | "
              "travel time median [s] | collisions | failed |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in summarise(result.rows):
         lines.append(
             f"| {s['tier']} | {fmt(s['density'], 2)} | {s['driver']} | {s['runs']} | "
-            f"{s['arrived']} | {100.0 * s['success_rate']:.0f}% | "
+            f"{s['arrived']} | {s['safe']} | {100.0 * s['success_rate']:.0f}% | "
             f"{fmt(s['clearance_mean'], 2)} | {fmt(s['clearance_median'], 2)} | "
             f"{fmt(s['travel_time_mean'], 1)} | {fmt(s['travel_time_median'], 1)} | "
             f"{s['collisions']} | {s['failed']} |")
@@ -702,6 +891,7 @@ def write_outputs(result: BenchResult, out_dir: Path, *, plots: bool = True) -> 
     p.write_text(json.dumps({
         "executor": result.executor, "drivers": list(result.drivers),
         "wall_time": result.wall_time, "cases_per_minute": result.cases_per_minute,
+        "interrupted": result.interrupted, "runs_planned": result.runs_planned,
         "cases": [asdict(c) | {"density": None if math.isnan(c.density) else c.density}
                   for c in result.cases],
         "runs": result.rows}, indent=1, allow_nan=False))
@@ -729,7 +919,7 @@ def read_runs_csv(path: str | Path) -> list[dict[str, Any]]:
             for k, v in raw.items():
                 if v == "":
                     row[k] = None
-                elif k == "arrived":
+                elif k in ("arrived", "safe"):
                     row[k] = v == "True"
                 elif k in ints:
                     row[k] = int(v)

@@ -395,6 +395,7 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 def _cmd_simulate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from splineplan.errors import Interrupted
     from splineplan.scenario import load_scenario
     from splineplan.sim import simulate
 
@@ -402,8 +403,12 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
     scenario = load_scenario(args.scenario)
     out = given or _out_dir(Path("runs") / scenario.name)
     _clear_outputs(out, _SIM_OUTPUTS)
-    result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
-                      progress=False if args.no_progress else None, driver=args.driver)
+    try:
+        result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
+                          progress=False if args.no_progress else None, driver=args.driver)
+    except Interrupted as stop:  # Ctrl-C: the record up to then is written
+        print(f"splineplan simulate: {stop}", file=sys.stderr)
+        return 130
     m = result.metrics
     print(f"{scenario.name}: {result.status}: {result.reason}")
     print(f"  travel time {m['travel_time'] or 0:.1f} s, distance {m['distance']:.1f} m, "
@@ -517,22 +522,28 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_bench(args: argparse.Namespace) -> int:
-    from splineplan.bench import DRIVERS, build_suite, run_suite, summarise
+    from splineplan.bench import DRIVERS, build_suite, exit_status, run_suite, summarise
+    from splineplan.errors import Interrupted
 
     _out_dir(args.out)
     cases = build_suite(args.suite, seeds=args.seeds, tiers=args.tiers, out_dir=args.out)
-    res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
-                    workers=args.workers, scheduler=args.scheduler,
-                    progress=not args.no_progress)
+    try:
+        res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
+                        workers=args.workers, scheduler=args.scheduler,
+                        progress=not args.no_progress)
+    except Interrupted as stop:  # Ctrl-C: the finished runs are written
+        print(f"splineplan bench: {stop}", file=sys.stderr)
+        return 130
     for s in summarise(res.rows):
-        print(f"{s['tier']:>8} {s['driver']:>8}: {s['arrived']}/{s['runs']} arrived")
+        print(f"{s['tier']:>8} {s['driver']:>8}: {s['safe']}/{s['runs']} arrived safely "
+              f"({s['arrived']} arrived, {s['collisions']} collisions)")
     failed = [r for r in res.rows if r["error"]]
     for r in failed:
         print(f"failed: {r['case']} ({r['driver']}): {r['error']}")
     print(f"{len(res.cases)} cases, {len(res.rows)} runs in {res.wall_time:.1f} s on "
           f"{res.executor}: {res.cases_per_minute:.1f} cases/min")
     print(f"written to {args.out}/ (runs.csv, runs.json, summary.md, figures)")
-    return 0
+    return exit_status(res.rows)
 
 
 # ---- end of commands --------------------------------------------------------------------

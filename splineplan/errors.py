@@ -118,3 +118,25 @@ def _finite(value: object) -> float | None:
     if isinstance(value, Real) and not isinstance(value, bool) and math.isfinite(value):
         return float(value)
     return None
+
+
+class Interrupted(KeyboardInterrupt):
+    """The user stopped a run (Ctrl-C, SIGINT); what it had done is written out.
+
+    Not a failure of the package, so not a :class:`SplineplanError`: a
+    :class:`KeyboardInterrupt`, so that code that does not know it stops as for any Ctrl-C.
+
+    Attributes
+    ----------
+    result
+        What the run returns when it ends normally, holding what was done up to the
+        interruption (a :class:`~splineplan.sim.SimResult` or a
+        :class:`~splineplan.bench.BenchResult`).
+    """
+
+    def __init__(self, message: str, result: object = None) -> None:
+        super().__init__(message)
+        self.result = result
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""

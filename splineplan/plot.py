@@ -525,7 +525,8 @@ def plot_bench(
 ) -> list[str]:
     """Figures of a scenario bench (rows of ``runs.csv``, :mod:`splineplan.bench`).
 
-    Writes ``bench_success.<fmt>`` (success rate [%] against obstacle density, per driver),
+    Writes ``bench_success.<fmt>`` (success rate [%]: safe arrivals, without a collision
+    or time off the road, against obstacle density, per driver),
     ``bench_clearance.<fmt>`` (each run's minimum clearance [m] against density, with the
     median per tier) and ``bench_travel_time.<fmt>`` (travel time [s] of the runs that
     arrived, by tier and driver). Density: stopped vehicles per 100 m of road; only the
@@ -548,7 +549,8 @@ def plot_bench(
             sel = [r for r in gen if r["driver"] == d and r["tier"] == t]
             if sel:
                 pts.append((float(np.mean([float(r["density"]) for r in sel])),
-                            100.0 * float(np.mean([bool(r["arrived"]) for r in sel])), t))
+                            100.0 * float(np.mean([bool(r.get("safe", r["arrived"]))
+                                                   for r in sel])), t))
         if not pts:
             continue
         pts.sort()
@@ -562,9 +564,10 @@ def plot_bench(
     ax.set_ylim(-5.0, 110.0)
     ax.set_xlabel("obstacle density [stopped vehicles per 100 m]")
     ax.set_ylabel("success rate [%]")
-    ax.set_title("Runs that arrived, by obstacle density")
+    ax.set_title("Runs that arrived safely (no collision, on the road), by obstacle density")
     ax.grid(True, lw=0.3, alpha=0.5)
-    ax.legend(loc="lower left", fontsize="small")
+    if ax.get_legend_handles_labels()[0]:  # none without generated fields
+        ax.legend(loc="lower left", fontsize="small")
     p = out / f"bench_success.{fmt}"
     _save(ax, p)
     written.append(str(p))
@@ -591,7 +594,8 @@ def plot_bench(
     ax.set_ylabel("minimum clearance to other vehicles [m]")
     ax.set_title("Clearance by obstacle density")
     ax.grid(True, lw=0.3, alpha=0.5)
-    ax.legend(loc="best", fontsize="small")
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="best", fontsize="small")
     p = out / f"bench_clearance.{fmt}"
     _save(ax, p)
     written.append(str(p))

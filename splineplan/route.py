@@ -17,7 +17,7 @@ import heapq
 import itertools
 import logging
 import weakref
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -320,6 +320,30 @@ def _build_search(cost: FloatArray, graph: ClassGraph, *, seed: int = 0) -> _Sea
     dt[~np.isfinite(dt)] = _BIG
     log.debug("landmarks %s", chosen)
     return _Search(adjacency, df, dt)
+
+
+def route_length(network: RoadNetwork, edges: Sequence[str], *, vclass: str = "passenger",
+                 start_pos: float = 0.0) -> float:
+    """Length [m] of the route through ``edges`` as :attr:`Route.length` counts it: from
+    ``start_pos`` on the first edge to the end of the last, the junction lanes between
+    consecutive edges included.
+
+    Raises
+    ------
+    UnknownEdgeError
+        An edge id is not in the network.
+    NoRouteError
+        Two consecutive edges are not connected for ``vclass``.
+    """
+    graph = network.graph(vclass)
+    path = [network.edge_index(e) for e in edges]
+    if not path:
+        return 0.0
+    for u, v in itertools.pairwise(path):
+        if v not in graph.indices[graph.indptr[u]:graph.indptr[u + 1]]:
+            raise NoRouteError(f"edge '{network.edge_ids[u]}' does not lead to edge "
+                               f"'{network.edge_ids[v]}' for vehicle class '{vclass}'")
+    return _path_totals(network, graph, path)[0] - float(start_pos)
 
 
 def _path_totals(network: RoadNetwork, graph: ClassGraph, path: list[int]) -> tuple[float, float]:

@@ -16,7 +16,9 @@ of a headless SUMO run:
 4. move the ego with ``vehicle.moveToXY(..., keepRoute=3)``: SUMO's position is the middle
    of the front bumper and its angle is in degrees, 0 = north, clockwise; ``keepRoute=3``
    keeps the exact x, y (bit 2) and maps the vehicle onto its route only (bit 1), which is
-   kept equal to the planned route with ``vehicle.setRoute``;
+   kept equal to the planned route with ``vehicle.setRoute``; its speed is set to the
+   closed loop's with ``vehicle.setSpeed`` (SUMO would infer one from the move, measured
+   along its lanes and capped by their speed limits: jumps at every lane boundary);
 5. check that SUMO put the ego where asked, and check the ego's footprint against every
    other vehicle's footprint and against the road (SUMO's own collision check runs too, with
    ``--collision.action warn``; nothing is teleported: ``--time-to-teleport -1``).
@@ -43,6 +45,7 @@ import csv
 import json
 import logging
 import math
+import os
 import sys
 import time
 import xml.etree.ElementTree as ET
@@ -53,9 +56,11 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 
+from splineplan._signals import sigint_ignored
 from splineplan.corridor import Corridor
 from splineplan.errors import (
     GeometryError,
+    Interrupted,
     NoRouteError,
     ParameterError,
     RoadBlockedError,
@@ -130,6 +135,11 @@ _TRAFFIC_REPLAN_EVERY = 0.5
 #: and the ego's own safety checks, run every step).
 TRIGGER_PERIOD = 0.3
 
+#: The closed loop's emergency deceleration, a multiple of the planner's ``b_max``: the
+#: speed control brakes up to this hard when something comes into the ego's path (and SUMO's
+#: vehicle type of the ego has it as its ``emergencyDecel``).
+EMERGENCY_FACTOR = 2.0
+
 #: Who drives the ego: ``planner`` (splineplan, through ``moveToXY``), ``sumo`` (SUMO's
 #: default car-following and lane-change models, lane-based: SUMO started without
 #: ``--lateral-resolution``) or ``sublane`` (SUMO's sublane model, which can shift within a
@@ -182,7 +192,8 @@ class SimResult:
     Attributes
     ----------
     status
-        ``arrived``, ``timeout`` (duration reached) or ``failed``.
+        ``arrived``, ``timeout`` (duration reached), ``failed`` or ``interrupted``
+        (Ctrl-C).
     reason
         Why the run stopped, in words.
     out_dir
@@ -192,7 +203,8 @@ class SimResult:
     replans
         Every planning call.
     route
-        The last planned route's edges.
+        The route's edges from the ego's start (after a re-route: the edges driven before
+        it, then the new route).
     driven
         Columns of ``trajectory.csv``, as arrays.
     plans
@@ -258,13 +270,20 @@ def simulate(
     ScenarioError, UnknownEdgeError, VehicleClassError, NoRouteError
         Bad input (missing file, unknown edge, an edge the ego's class may not use).
     SimulationError
-        SUMO failed to start or to step, or the ego left the simulation unplanned.
+        SUMO failed to start or to step, or the ego left the simulation unplanned; with
+        ``gui=True``, no display to show ``sumo-gui`` on (checked before anything starts).
+    Interrupted
+        Ctrl-C (``KeyboardInterrupt``) during the run: SUMO is closed (``fcd.xml`` complete),
+        ``trajectory.csv`` and ``metrics.json`` (status ``interrupted``, the time reached)
+        are written, no pictures; the exception's ``result`` is the :class:`SimResult`.
     """
     if seed is not None:
         scenario = scenario.with_seed(seed)
     if driver not in DRIVERS:
         raise ParameterError(f"driver must be one of {', '.join(map(repr, DRIVERS))}, "
                              f"not {driver!r}")
+    if gui:
+        _check_display()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     run = _Run(scenario, out, driver=driver, gui=gui, on_step=on_step,
@@ -277,6 +296,12 @@ def _simulate(run: _Run, scenario: Scenario, *, plot: bool) -> SimResult:
     try:
         run.setup()
         run.loop()
+    except KeyboardInterrupt as err:  # Ctrl-C: close SUMO, write the record, then stop
+        with sigint_ignored():
+            run.interrupt()
+            result = run.finish(plot=False)
+        raise Interrupted(f"{scenario.name}: interrupted {run.when()}; the record up to "
+                          f"then is in {run.out}", result) from err
     except SplineplanError as err:
         run.fail(err)
         run.finish(plot=plot)
@@ -348,8 +373,9 @@ class _Run:
         self.sumo_collisions: list[dict[str, Any]] = []
         self.position_errors: list[float] = []
         self.avoid: set[str] = set()
-        self.route_edges: tuple[str, ...] = ()
-        self.route_length = math.nan
+        self.route_edges: tuple[str, ...] = ()  # the route planned from where it was set
+        self.driven_before: tuple[str, ...] = ()  # edges driven before its first edge
+        self.route_length = math.nan  # [m] of the whole route, from the ego's start
         self.corridor: Corridor | None = None
         self.net: Any = None
         self.in_sim = False
@@ -548,6 +574,14 @@ class _Run:
         s.vehicletype.setWidth(vtype, ego.width)
         s.vehicletype.setVehicleClass(vtype, ego.vclass)
         s.vehicletype.setMaxSpeed(vtype, ego.max_speed)
+        if self.driver == "planner":
+            # SUMO's view of the ego's limits: the planner's, with the closed loop's
+            # emergency braking (twice b_max, see _drive) as the physical limit; SUMO's
+            # other drivers read these for the ego as a leader
+            tp = self.sc.trajectory
+            s.vehicletype.setAccel(vtype, tp.a_max)
+            s.vehicletype.setDecel(vtype, tp.b_max)
+            s.vehicletype.setEmergencyDecel(vtype, EMERGENCY_FACTOR * tp.b_max)
         s.vehicletype.setColor(vtype, (255, 0, 0, 255))
         rid = f"{ego.id}_route"
         s.route.add(rid, list(self.route_edges))
@@ -1268,7 +1302,7 @@ class _Run:
     def _reroute(self, err: RoadBlockedError) -> tuple[bool, Any]:
         """Level 1 again with the blocked edge avoided. Returns (done, detail or error)."""
         from splineplan.network import route_corridor
-        from splineplan.route import shortest_route
+        from splineplan.route import route_length, shortest_route
 
         ego = self.sc.ego
         assert self.corridor is not None
@@ -1292,9 +1326,12 @@ class _Run:
         except Exception as e:
             return False, SimulationError(f"SUMO refused the new route: {_sumo_message(e)}")
         old = self.route_edges
+        self.driven_before += old[:old.index(here)]
         self._set_route(corridor, route.edges)
         self.station = float(corridor.to_sl(self.pose[:2])[0, 0])
-        self.route_length = route.length
+        # the route as driven from the start: what was driven before, then the new route
+        self.route_length = route_length(self.net, self.driven_before + route.edges,
+                                         vclass=ego.vclass, start_pos=ego.start_pos)
         log.info("t=%.1f re-routed around %s", self.time, blocked)
         return True, (f"edge '{blocked}' blocked; route {' '.join(old)} -> "
                       f"{' '.join(route.edges)}")
@@ -1332,7 +1369,7 @@ class _Run:
         # stop at the trajectory's end unless a new plan comes first
         v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (end - self.u), 0.0)))
         v_target = min(v_plan, v_cap)
-        emergency = 2.0 * tp.b_max
+        emergency = EMERGENCY_FACTOR * tp.b_max
         v_new = min(max(v_target, self.v - emergency * dt), self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
         u = min(self.u + 0.5 * (self.v + v_new) * dt, end)
@@ -1364,6 +1401,11 @@ class _Run:
         lane = self._lane_of[1]
         t0 = time.perf_counter()
         s.vehicle.moveToXY(self.ego, edge, lane, fx, fy, angle, KEEP_ROUTE)
+        # without it SUMO infers the speed from the move, measured along its lanes' lengths
+        # and capped by the lanes' speed limits: at each lane change and junction it
+        # saw jumps of the speed (and "emergency braking" of 10 to 37 m/s^2) that the plan
+        # never had
+        s.vehicle.setSpeed(self.ego, self.v)
         self.sumo_seconds += time.perf_counter() - t0
 
     def _gap_speed(self) -> tuple[float, int]:
@@ -1440,8 +1482,23 @@ class _Run:
         self.status = "failed"
         self.reason = f"{type(err).__name__}: {_sumo_message(err)}"
 
+    def interrupt(self) -> None:
+        """The user stopped the run (Ctrl-C)."""
+        self.status = "interrupted"
+        where = "" if self.depart_time is None else f" at station {self.station:.1f} m"
+        self.reason = (f"interrupted by the user (Ctrl-C) {self.when()}{where}"
+                       + (f" (before: {self.reason})" if self.reason else ""))
+
+    def when(self) -> str:
+        """The simulation time reached, in words."""
+        if self.sumo_started or self.time > 0.0:
+            return f"at t={self.time:.1f} s"
+        return "before the simulation started"
+
+
     def finish(self, *, plot: bool) -> SimResult:
-        if self.sumo is not None and self.sumo_started:
+        # SUMO may be running without sumo_started set, when Ctrl-C came as it started
+        if self.sumo is not None and (self.sumo_started or self.status == "interrupted"):
             t0 = time.perf_counter()
             _safe_close(self.sumo)
             self.sumo_seconds += time.perf_counter() - t0
@@ -1454,7 +1511,7 @@ class _Run:
         with (self.out / "metrics.json").open("w") as fh:
             json.dump(_jsonable(metrics), fh, indent=2, allow_nan=False)
         result = SimResult(self.status, self.reason, self.out, metrics, tuple(self.replans),
-                           self.route_edges, driven, tuple(self.plans))
+                           self.driven_before + self.route_edges, driven, tuple(self.plans))
         if plot:
             try:
                 _plot(self, result)
@@ -1497,7 +1554,9 @@ class _Run:
             "depart_time": self.depart_time,
             "travel_time": travel,
             "distance": dist,
-            "route": list(self.route_edges),
+            # the route from the ego's start: after a re-route, the edges driven before it
+            # and the new route
+            "route": list(self.driven_before + self.route_edges),
             "route_length": finite_or_none(self.route_length),
             "avoided_edges": sorted(self.avoid),
             "safety_margin": sc.roadmap.safety_margin,
@@ -1613,6 +1672,18 @@ def _sumo_message(err: BaseException) -> str:
     if text.startswith("<libsumo"):
         return type(err).__name__
     return text
+
+
+def _check_display() -> None:
+    """Fail at once where ``sumo-gui`` has no display to open (Linux and other X11/Wayland
+    systems without ``DISPLAY`` or ``WAYLAND_DISPLAY``): traci would otherwise retry its
+    connection for a minute while sumo-gui fails to open its window."""
+    if sys.platform.startswith(("win", "darwin")):
+        return
+    if not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise SimulationError("gui=True (--gui) needs a display to show sumo-gui on, and "
+                              "neither DISPLAY nor WAYLAND_DISPLAY is set; run without the "
+                              "GUI (the outputs are the same) or on a desktop session")
 
 
 def _safe_close(sumo_mod: Any) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import itertools
+import json
 import statistics
 import typing
 from pathlib import Path
@@ -87,6 +88,10 @@ def _expected_lines(csv_path: Path) -> list[str]:
     for tier, driver in keys:
         sel = [r for r in runs if r["tier"] == tier and r["driver"] == driver]
         arrived = [r for r in sel if r["arrived"] == "True"]
+        # a success: arrived without a collision and without time off the road
+        safe = [r for r in arrived
+                if int(r["collisions"]) == 0 and float(r["time_off_road"] or 0.0) == 0.0]
+        assert [r["safe"] == "True" for r in sel] == [r in safe for r in sel]
         clear = [float(r["min_clearance"]) for r in sel if r["min_clearance"]]
         travel = [float(r["travel_time"]) for r in arrived]
 
@@ -97,8 +102,8 @@ def _expected_lines(csv_path: Path) -> list[str]:
         cmed = f([statistics.median(clear)] if clear else [], 2)
         tm = f([statistics.mean(travel)] if travel else [], 1)
         tmed = f([statistics.median(travel)] if travel else [], 1)
-        lines.append(f"| {driver} | {len(sel)} | {len(arrived)} | "
-                     f"{100 * len(arrived) / len(sel):.0f}% | {cm} | {cmed} | {tm} | {tmed} |")
+        lines.append(f"| {driver} | {len(sel)} | {len(arrived)} | {len(safe)} | "
+                     f"{100 * len(safe) / len(sel):.0f}% | {cm} | {cmed} | {tm} | {tmed} |")
     return lines
 
 
@@ -134,6 +139,34 @@ def test_a_crashing_case_is_a_failed_row_and_the_suite_goes_on(
     # the cases around it ran
     assert sum(r["arrived"] for r in local.rows if r["case"] != "missing_edge_s0") >= 3
     assert "no_such_edge" in Path(local.files[2]).read_text()
+
+
+def test_a_run_with_collisions_or_off_road_is_no_success(local: bench.BenchResult) -> None:
+    """A run that arrives through other cars (16 collisions, as one did) or partly off the
+    road arrived, but is not a safe arrival, and the success rate counts safe arrivals
+    only."""
+    m = json.loads((Path(local.rows[0]["run_dir"]) / "metrics.json").read_text())
+    assert local.rows[0]["arrived"] and local.rows[0]["safe"]
+    assert bench._row_metrics(m, "arrived", "")["safe"]
+    for bad in ({"collisions": 16}, {"time_off_road": 0.4}):
+        row = {**local.rows[0], **bench._row_metrics({**m, **bad}, "arrived", "")}
+        assert row["arrived"] and not row["safe"]
+        s = bench.summarise([row])[0]
+        assert (s["arrived"], s["safe"], s["success_rate"]) == (1, 0, 0.0)
+
+
+def test_exit_status(local: bench.BenchResult, suite_dir: Path, tmp_path: Path) -> None:
+    """1 when a planner run failed with an error, or when no run arrived safely; else 0."""
+    rows = local.rows
+    broken = [r for r in rows if r["case"] == "missing_edge_s0"]
+    assert bench.exit_status(rows) == 1  # the planner's run of missing_edge failed
+    assert bench.exit_status([r for r in rows if r not in broken]) == 0
+    assert bench.exit_status([r for r in broken if r["driver"] != "planner"]) == 1  # none safe
+    from splineplan.cli import main
+
+    code = main(["bench", str(suite_dir / "missing_edge.toml"), "--drivers", "sumo",
+                 "--workers", "1", "--out", str(tmp_path / "out"), "--no-progress"])
+    assert code == 1  # every run failed
 
 
 def test_blocked_field_planner_arrives(local: bench.BenchResult) -> None:

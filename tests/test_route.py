@@ -20,7 +20,7 @@ from splineplan.errors import (
     VehicleClassError,
 )
 from splineplan.network import RoadNetwork, load_network
-from splineplan.route import Route, dijkstra, shortest_route
+from splineplan.route import Route, dijkstra, route_length, shortest_route
 
 CITY = NETS / "city.net.xml"
 CASES = [("straight.net.xml", "passenger"), ("grid.net.xml", "passenger"),
@@ -156,6 +156,18 @@ def test_start_pos_matches_sumolib() -> None:
         shortest_route(net, "SWA0", "G1G2", start_pos=-1.0)
     with pytest.raises(ParameterError, match="start_pos"):
         shortest_route(net, "SWA0", "G1G2", start_pos=1e6)
+
+
+def test_route_length_of_given_edges() -> None:
+    """route_length re-adds a route's edges and junction lanes as sumolib does, from a start
+    position; edges that do not connect are an error that names them."""
+    net, sn = _nets(CITY)
+    for a, b, pos in (("SWA0", "G1G2", 10.0), ("A0B0", "E3D3", 55.5)):
+        route = shortest_route(net, a, b, start_pos=pos)
+        assert route_length(net, route.edges, start_pos=pos) == pytest.approx(route.length)
+        assert route_length(net, route.edges) == pytest.approx(validate(sn, route) + pos)
+    with pytest.raises(NoRouteError, match="'SWA0' does not lead to edge 'G1G2'"):
+        route_length(net, ("SWA0", "G1G2"))
 
 
 def test_avoided_edges_are_never_used() -> None:

@@ -5,8 +5,12 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import itertools
 import json
 import math
+import re
+import sys
+import time
 import xml.etree.ElementTree as ET
 from collections.abc import Iterator
 from pathlib import Path
@@ -177,6 +181,87 @@ def test_blocked_road_reroutes(runs: dict[str, SimResult]) -> None:
     xy = np.column_stack((r.driven["x"], r.driven["y"]))
     d = [sumolib.geomhelper.distancePointToPolygon(tuple(p), lane.getShape()) for p in xy]
     assert min(d) > 3.0
+
+
+def test_route_length_after_a_reroute_counts_from_the_start(runs: dict[str, SimResult]
+                                                            ) -> None:
+    """After the re-route, ``route`` and ``route_length`` are the route driven from the
+    ego's start (not from where it re-routed): the length re-added from sumolib's own edge
+    and junction-lane lengths, and at least the distance the ego's centre drove (it starts
+    half a length behind the start position and stops before the goal edge's end)."""
+    r = runs["blocked_road"]
+    m = r.metrics
+    sc = load_scenario(SCENARIOS / "blocked_road.toml")
+    assert [p for p in r.replans if p.reason == "reroute"]
+    edges = m["route"]
+    assert edges[0] == sc.ego.start_edge and edges[-1] == sc.ego.goal_edge
+    assert tuple(edges) == r.route
+    net = sumolib.net.readNet(str(NETS / "grid.net.xml"), withInternal=True)
+    total = sum(net.getEdge(e).getLength() for e in edges) - sc.ego.start_pos
+    for a, b in itertools.pairwise(edges):
+        path, cost = net.getShortestPath(net.getEdge(a), net.getEdge(b), withInternal=True,
+                                         vClass=sc.ego.vclass)
+        normal = [e.getID() for e in path if not e.getID().startswith(":")]
+        assert normal == [a, b]  # the direct connection, through the junction's lanes
+        total += cost - net.getEdge(a).getLength() - net.getEdge(b).getLength()
+    assert m["route_length"] == pytest.approx(total, abs=0.05)
+    assert m["route_length"] >= m["distance"] - 1.0
+
+
+def test_sumo_sees_the_planned_speed(runs: dict[str, SimResult]) -> None:
+    """SUMO's speed of the ego (its FCD record) is the closed loop's speed, also across
+    lane changes and junctions, where SUMO would otherwise infer a speed from the moves
+    along its lanes' lengths, capped by the lanes' speed limits (up to 3.2 m/s off the
+    plan in this run before the speed was set)."""
+    r = runs["blocked_road"]
+    fcd = _fcd(r.out_dir / "fcd.xml")
+    worst, compared = 0.0, 0
+    for t, v in zip(r.driven["t"], r.driven["speed"], strict=True):
+        rec = fcd.get(round(float(t) - 0.1, 3), {}).get("ego")  # see the test above
+        if rec is not None:
+            worst = max(worst, abs(rec[3] - float(v)))
+            compared += 1
+    assert compared > 400
+    assert worst < 0.01  # FCD rounds to 2 decimals
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+def test_sumo_log_has_no_false_alarms_for_the_ego(runs: dict[str, SimResult], name: str
+                                                  ) -> None:
+    """SUMO's log says "emergency braking" for the ego only where the closed loop braked at
+    its emergency limit (twice b_max, the ego's emergencyDecel in SUMO), never with the
+    decelerations of 9 to 37 m/s^2 SUMO inferred from the moves before; an "implied speed"
+    above the maximum at most once: SUMO measures a move along its lane's length, which
+    on a curved junction lane differs from the distance the ego moved beside the lane's
+    centre line (README, Conventions)."""
+    sc = load_scenario(SCENARIOS / f"{name}.toml")
+    lines = (runs[name].out_dir / "sumo.log").read_text().splitlines()
+    ego = [ln for ln in lines if f"Vehicle '{sc.ego.id}'" in ln]
+    brakes = [float(re.search(r"decel=([0-9.]+)", ln)[1])  # type: ignore[index]
+              for ln in ego if "emergency braking" in ln]
+    implied = [ln for ln in ego if "implied speed" in ln]
+    assert all(d <= 2.0 * sc.trajectory.b_max + 0.01 for d in brakes), ego
+    assert len(implied) <= 1, implied
+
+
+def test_gui_without_display_fails_at_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """No display: one line, status 2, before anything starts (no output folder)."""
+    from splineplan.cli import main
+
+    if sys.platform.startswith(("win", "darwin")):
+        pytest.skip("sumo-gui needs no DISPLAY there")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    out = tmp_path / "run"
+    t0 = time.perf_counter()
+    code = main(["simulate", str(SCENARIOS / "empty_road.toml"), "--gui", "--out", str(out)])
+    assert time.perf_counter() - t0 < 5.0
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("splineplan simulate: error: ")
+    assert "--gui" in err[0] and "DISPLAY" in err[0]
+    assert not out.exists()
 
 
 def test_appearing_obstacle_replans_in_time(runs: dict[str, SimResult]) -> None:
