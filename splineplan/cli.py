@@ -270,7 +270,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     if args.plot:
         from splineplan.plot import plot_trajectory
 
-        plot_trajectory(tr, result.corridor, obstacles, list(result.roadmaps), path=args.plot)
+        plot_trajectory(tr, result.corridor, obstacles, list(result.roadmaps), path=args.plot,
+                        s_max=tp.s_max)
     print(f"route: {' '.join(result.route.edges)} ({result.route.length:.1f} m)")
     if result.blocked:
         print(f"closed and avoided: {' '.join(result.blocked)}")
