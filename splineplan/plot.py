@@ -36,7 +36,8 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.legend_handler import HandlerBase
-from matplotlib.patches import Rectangle
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, Rectangle
 
 if TYPE_CHECKING:
     from splineplan.corridor import Corridor
@@ -823,7 +824,9 @@ def plot_bench(
     Writes ``bench_success.<fmt>`` (success rate [%] against obstacle density, per driver),
     ``bench_clearance.<fmt>`` (each run's minimum clearance [m] against density, with the
     median per tier) and ``bench_travel_time.<fmt>`` (travel time [s] of the runs that
-    arrived, by tier and driver). Density: stopped vehicles per 100 m of road; only the
+    arrived, by tier and driver: a labelled bar at the median, each run a marker, drivers
+    told apart by colour, hatch and marker; a driver with no arrival in a tier is named
+    there). Density: stopped vehicles per 100 m of road; only the
     generated fields have one. Returns the files written.
     """
     out = Path(out_dir)
@@ -891,33 +894,55 @@ def plot_bench(
     _save(ax, p)
     written.append(str(p))
 
-    # travel time by tier and driver: box plots of the runs that arrived
-    ax = Figure(figsize=(max(6.0, 1.3 * len(tiers) * max(len(drivers), 1)), 4.5),
+    # travel time by tier and driver: a bar at the median of the runs that arrived, each
+    # run a marker on it, the value written above; drivers told apart by colour, hatch
+    # and marker; a driver that never arrived in a tier says so where its bar would be
+    ax = Figure(figsize=(max(6.5, 0.9 * len(tiers) * max(len(drivers), 1) + 2.5), 4.8),
                 layout="constrained").add_subplot()
     width = 0.8 / max(len(drivers), 1)
+    hatches = ("", "//", "..", "xx", "\\\\", "++")
+    top = max([float(r["travel_time"]) for r in rows if r.get("arrived")
+               and r.get("travel_time") is not None] or [1.0])
+    proxies: list[tuple[Any, str]] = []
     for k, d in enumerate(drivers):
-        c, _, name = style(d)
-        data, pos = [], []
+        c, m, name = style(d)
+        hatch = hatches[k % len(hatches)]
         for i, t in enumerate(tiers):
-            v = [float(r["travel_time"]) for r in rows if r["driver"] == d and r["tier"] == t
-                 and r.get("arrived") and r.get("travel_time") is not None]
-            if v:
-                data.append(v)
-                pos.append(i + (k - (len(drivers) - 1) / 2.0) * width)
-        if data:
-            bp = ax.boxplot(data, positions=pos, widths=width * 0.85, patch_artist=True,
-                            manage_ticks=False)
-            for patch in bp["boxes"]:
-                patch.set(facecolor=c, alpha=0.55, edgecolor=c)
-            for med_line in bp["medians"]:
-                med_line.set(color="k")
-        ax.plot([], [], color=c, lw=6, alpha=0.55, label=name)
+            sel = [r for r in rows if r["driver"] == d and r["tier"] == t]
+            if not sel:
+                continue
+            x = i + (k - (len(drivers) - 1) / 2.0) * width
+            v = [float(r["travel_time"]) for r in sel
+                 if r.get("arrived") and r.get("travel_time") is not None]
+            if not v:
+                ax.text(x, 0.02 * top, f"{name}: none of {len(sel)} arrived", rotation=90,
+                        ha="center", va="bottom", fontsize="x-small", color=c,
+                        gid=f"travel_none_{d}")
+                continue
+            med = float(np.median(v))
+            ax.bar([x], [med], width=width * 0.9, color=c, alpha=0.35, edgecolor=c,
+                   hatch=hatch, lw=1.2, gid=f"travel_{d}")
+            jit = np.linspace(-0.25, 0.25, len(v)) * width if len(v) > 1 else np.zeros(1)
+            ax.plot(x + jit, v, ls="none", marker=m, ms=6, color=c, mec="k", mew=0.6,
+                    zorder=4, gid=f"travel_runs_{d}")
+            note = f"{med:.1f} s" + (f"\n(median of {len(v)})" if len(v) > 1 else "")
+            if len(v) < len(sel):
+                note += f"\n{len(sel) - len(v)} of {len(sel)} not arrived"
+            ax.annotate(note, (x, max(v)), xytext=(0, 4), textcoords="offset points",
+                        ha="center", va="bottom", fontsize="x-small")
+        proxies += [(Patch(facecolor=c, alpha=0.35, edgecolor=c, hatch=hatch, lw=1.2),
+                     f"{name}: median"),
+                    (Line2D([], [], ls="none", marker=m, ms=6, color=c, mec="k", mew=0.6),
+                     f"{name}: each run")]
     ax.set_xticks(range(len(tiers)), tiers)
+    ax.set_xlim(-0.5, len(tiers) - 0.5)
+    ax.set_ylim(0.0, 1.25 * top)
     ax.set_xlabel("difficulty tier")
     ax.set_ylabel("travel time of runs that arrived [s]")
     ax.set_title("Travel time by tier")
     ax.grid(True, axis="y", lw=0.3, alpha=0.5)
-    ax.legend(loc="best", fontsize="small")
+    ax.figure.legend([h for h, _ in proxies], [lab for _, lab in proxies],
+                     loc="outside right upper", fontsize="small")
     p = out / f"bench_travel_time.{fmt}"
     _save(ax, p)
     written.append(str(p))
