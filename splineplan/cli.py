@@ -179,6 +179,8 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         raise ScenarioError(f"{run} holds neither plan.json nor metrics.json")
     for f in written:
         print(f)
+    if not written:
+        print(f"{run}: nothing to draw (see the warnings)")
     return 0
 
 def _add_simulate(sub: argparse._SubParsersAction) -> None:

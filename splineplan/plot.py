@@ -700,12 +700,29 @@ def plot_run_folder(
 ) -> list[str]:
     """Figures of a simulation run folder (``metrics.json``, ``trajectory.csv``).
 
-    Writes ``route.<fmt>`` (Fig. 3: the planned route on the network around it, with the
-    driven path coloured by speed on the scale 0 .. ``s_max``; needs the scenario's
-    network, else only the driven path) and ``speed_time.<fmt>`` (speed over time). A run
-    that failed says so in the title, with the reason from ``metrics.json``. Figures with
-    nothing to draw (no driven path and no network; no speed samples) are skipped with a
-    warning in the log, not written blank. Returns the files written.
+    Writes ``route.<fmt>`` and ``speed_time.<fmt>`` as drawn by :func:`run_figures`; a
+    figure with nothing to draw is not written (a warning in the log says so). Returns the
+    files written.
+    """
+    dest = Path(out_dir) if out_dir is not None else Path(run_dir)
+    written: list[str] = []
+    for name, ax in run_figures(run_dir).items():
+        p = dest / f"{name}.{fmt}"
+        _save(ax, p)
+        written.append(str(p))
+    return written
+
+
+def run_figures(run_dir: str | PathLike[str]) -> dict[str, Any]:
+    """The figures of a simulation run folder, by name: ``route`` and ``speed_time`` axes.
+
+    ``route`` (Fig. 3) is the planned route on the network around it (:func:`plot_route`)
+    with the driven path coloured by speed on the scale 0 .. ``s_max`` (gid
+    ``driven_speed``); without a readable scenario network, only the driven path.
+    ``speed_time`` is the speed over time. A run that did not arrive says so in the titles,
+    with the reason from ``metrics.json``. A figure with nothing to draw (no driven path
+    and no network; no speed samples) is left out, with a warning in the log, rather than
+    drawn blank.
     """
     import json
 
@@ -713,20 +730,20 @@ def plot_run_folder(
     from splineplan.io import read_trajectory_csv
 
     run = Path(run_dir)
-    dest = Path(out_dir) if out_dir is not None else run
     metrics = json.loads((run / "metrics.json").read_text())
+    driven: Any = None
     try:
         driven = read_trajectory_csv(run / "trajectory.csv")
-        moved = len(driven.x) >= 2
     except SplineplanError as err:
         log.warning("no driven path in %s: %s", run, err)
-        driven, moved = None, False
+    moved = driven is not None and len(driven.x) >= 2
     name = metrics.get("scenario", run.name)
     status = str(metrics.get("status") or "unknown")
     reason = str(metrics.get("reason") or "")
     failed = not metrics.get("arrived", status == "arrived")
-    written: list[str] = []
+    why = reason if failed else ""
     s_max = metrics.get("s_max")
+    figures: dict[str, Any] = {}
     ax = None
     edges = tuple(metrics.get("route") or ())
     if edges and metrics.get("scenario_file"):
@@ -742,24 +759,23 @@ def plot_run_folder(
             s_max = s_max or sc.trajectory.s_max
             head = (f"{name}: route and driven path ({metrics.get('driver')}, {status})"
                     if moved else f"{name}: planned route; not driven ({status})")
-            ax = plot_route(net, route, title=_title(head, reason if failed else ""),
-                            also_show=None if driven is None or not moved
-                            else np.column_stack((driven.x, driven.y)))
+            ax = plot_route(net, route, title=_title(head, why),
+                            also_show=np.column_stack((driven.x, driven.y)) if moved else None)
         except (SplineplanError, OSError, KeyError, AttributeError) as err:
             log.warning("no network picture for %s: %s", run, err)
             ax = None
     fresh = ax is None
     if ax is None and moved:
         ax = Figure(figsize=(8, 6), layout="constrained").add_subplot()
-        ax.set_title(_title(f"{name}: driven path ({status})", reason if failed else ""))
+        ax.set_title(_title(f"{name}: driven path ({status})", why))
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
     if ax is None:
-        log.warning("%s: the run has no driven path and its network is not readable: "
-                    "route.%s not drawn (%s: %s)", run, fmt, status, reason)
+        log.warning("%s: the run has no driven path and its network is not readable: no "
+                    "route figure (%s: %s)", run, status, reason)
     else:
-        if moved and driven is not None:
+        if moved:
             top = _speed_scale(s_max, driven.speed)
             lc = _speed_line(np.column_stack((driven.x, driven.y)), driven.speed, top, lw=2.2,
                              gid="driven_speed", zorder=5, label="driven path, coloured by speed")
@@ -772,10 +788,8 @@ def plot_run_folder(
             if fresh:
                 ax.autoscale_view()
         _legend([ax])
-        p = dest / f"route.{fmt}"
-        _save(ax, p)
-        written.append(str(p))
-    if moved and driven is not None:
+        figures["route"] = ax
+    if moved:
         ax2 = Figure(figsize=(8.0, 3.5), layout="constrained").add_subplot()
         ax2.plot(driven.t, driven.speed, color="#1565c0", lw=1.5, gid="speed", label="speed")
         if s_max:
@@ -784,16 +798,14 @@ def plot_run_folder(
         ax2.set_ylim(bottom=0.0)
         ax2.set_xlabel("time t [s]")
         ax2.set_ylabel("speed [m/s]")
-        ax2.set_title(_title(f"{name}: speed over time ({status})", reason if failed else ""))
+        ax2.set_title(_title(f"{name}: speed over time ({status})", why))
         ax2.grid(True, lw=0.3, alpha=0.5)
         ax2.legend(loc="best", fontsize="small")
-        p = dest / f"speed_time.{fmt}"
-        _save(ax2, p)
-        written.append(str(p))
+        figures["speed_time"] = ax2
     else:
-        log.warning("%s: the ego did not move: speed_time.%s not drawn (%s: %s)", run, fmt,
+        log.warning("%s: the ego did not move: no speed-over-time figure (%s: %s)", run,
                     status, reason)
-    return written
+    return figures
 
 
 def _title(head: str, reason: str) -> str:
@@ -894,6 +906,20 @@ def plot_bench(
     _save(ax, p)
     written.append(str(p))
 
+    ax = _bench_travel_time(rows, drivers, tiers)
+    p = out / f"bench_travel_time.{fmt}"
+    _save(ax, p)
+    written.append(str(p))
+    return written
+
+
+def _bench_travel_time(rows: Sequence[Mapping[str, Any]], drivers: list[str],
+                       tiers: list[str]) -> Any:
+    """Travel time [s] by tier and driver: the axes of ``bench_travel_time``."""
+
+    def style(d: str) -> tuple[str, str, str]:
+        return BENCH_STYLE.get(d, ("0.3", "x", d))
+
     # travel time by tier and driver: a bar at the median of the runs that arrived, each
     # run a marker on it, the value written above; drivers told apart by colour, hatch
     # and marker; a driver that never arrived in a tier says so where its bar would be
@@ -911,24 +937,24 @@ def plot_bench(
             sel = [r for r in rows if r["driver"] == d and r["tier"] == t]
             if not sel:
                 continue
-            x = i + (k - (len(drivers) - 1) / 2.0) * width
-            v = [float(r["travel_time"]) for r in sel
-                 if r.get("arrived") and r.get("travel_time") is not None]
-            if not v:
-                ax.text(x, 0.02 * top, f"{name}: none of {len(sel)} arrived", rotation=90,
+            xb = i + (k - (len(drivers) - 1) / 2.0) * width
+            tv = [float(r["travel_time"]) for r in sel
+                  if r.get("arrived") and r.get("travel_time") is not None]
+            if not tv:
+                ax.text(xb, 0.02 * top, f"{name}: none of {len(sel)} arrived", rotation=90,
                         ha="center", va="bottom", fontsize="x-small", color=c,
                         gid=f"travel_none_{d}")
                 continue
-            med = float(np.median(v))
-            ax.bar([x], [med], width=width * 0.9, color=c, alpha=0.35, edgecolor=c,
+            med = float(np.median(tv))
+            ax.bar([xb], [med], width=width * 0.9, color=c, alpha=0.35, edgecolor=c,
                    hatch=hatch, lw=1.2, gid=f"travel_{d}")
-            jit = np.linspace(-0.25, 0.25, len(v)) * width if len(v) > 1 else np.zeros(1)
-            ax.plot(x + jit, v, ls="none", marker=m, ms=6, color=c, mec="k", mew=0.6,
+            jit = np.linspace(-0.25, 0.25, len(tv)) * width if len(tv) > 1 else np.zeros(1)
+            ax.plot(xb + jit, tv, ls="none", marker=m, ms=6, color=c, mec="k", mew=0.6,
                     zorder=4, gid=f"travel_runs_{d}")
-            note = f"{med:.1f} s" + (f"\n(median of {len(v)})" if len(v) > 1 else "")
-            if len(v) < len(sel):
-                note += f"\n{len(sel) - len(v)} of {len(sel)} not arrived"
-            ax.annotate(note, (x, max(v)), xytext=(0, 4), textcoords="offset points",
+            note = f"{med:.1f} s" + (f"\n(median of {len(tv)})" if len(tv) > 1 else "")
+            if len(tv) < len(sel):
+                note += f"\n{len(sel) - len(tv)} of {len(sel)} not arrived"
+            ax.annotate(note, (xb, max(tv)), xytext=(0, 4), textcoords="offset points",
                         ha="center", va="bottom", fontsize="x-small")
         proxies += [(Patch(facecolor=c, alpha=0.35, edgecolor=c, hatch=hatch, lw=1.2),
                      f"{name}: median"),
@@ -943,7 +969,4 @@ def plot_bench(
     ax.grid(True, axis="y", lw=0.3, alpha=0.5)
     ax.figure.legend([h for h, _ in proxies], [lab for _, lab in proxies],
                      loc="outside right upper", fontsize="small")
-    p = out / f"bench_travel_time.{fmt}"
-    _save(ax, p)
-    written.append(str(p))
-    return written
+    return ax

@@ -71,15 +71,17 @@ def test_trajectory_figure(planned: object, tmp_path: Path) -> None:
     tr = plan.trajectory
     out = tmp_path / "fig4.pdf"
     ax = plot_trajectory(tr, plan.corridor, plan.map.obstacles, plan.roadmaps, path=out,
-                         footprint_every=10.0)
+                         footprint_every=10.0, s_max=TrajectoryParams().s_max)
     assert out.read_bytes()[:4] == b"%PDF"
     (line,) = _by_gid(ax, "trajectory")
     np.testing.assert_array_equal(line.get_xdata(), tr.x)
     np.testing.assert_array_equal(line.get_ydata(), tr.y)
     (coloured,) = _by_gid(ax, "trajectory_speed")
     assert isinstance(coloured, LineCollection)
-    assert coloured.norm.vmin == pytest.approx(tr.speed.min())
-    assert coloured.norm.vmax == pytest.approx(tr.speed.max())
+    # the colour scale is the same in every picture: 0 .. s_max, not the speeds' range
+    assert coloured.norm.vmin == 0.0
+    assert coloured.norm.vmax == pytest.approx(TrajectoryParams().s_max)
+    assert tr.speed.min() > 0.5 or tr.speed.max() < TrajectoryParams().s_max - 0.5
     segs = coloured.get_segments()
     assert len(segs) == len(tr.x) - 1
     np.testing.assert_allclose(np.asarray(segs[5])[0], [tr.x[5], tr.y[5]])
