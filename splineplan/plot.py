@@ -55,6 +55,9 @@ ROUTE_PAD_MIN = 150.0
 #: An overview of the whole network is added when the view shows less than this fraction
 #: of the network's bounding box (by area).
 OVERVIEW_BELOW = 0.25
+#: A road-frame figure whose road turns by more than this [rad] gets a map of the road in
+#: x-y on top.
+BENDS_FROM = 0.35
 #: Corridors longer than this [m] are drawn in the road's frame, in stacked panels ...
 ROAD_FRAME_FROM = 200.0
 #: ... of at most this much road [m] each.
@@ -543,12 +546,49 @@ def _plan_axes(ax: Any, corridor: Corridor, frame: str) -> tuple[list[Any], _Fra
     step = corridor.length / n
     lat = _lateral_span(corridor)
     panel_h = 9.6 * (lat[1] - lat[0]) / (step + 2.0)
-    fig = Figure(figsize=(11.0, n * (panel_h + 0.32) + 1.9), layout="constrained")
-    axes = list(fig.subplots(n, 1, squeeze=False)[:, 0])
+    heading = np.unwrap(corridor.heading_at(corridor.s))
+    bends = float(np.ptp(heading)) > BENDS_FROM
+    poly = corridor.polygon()
+    dx, dy = np.ptp(poly, axis=0) + 1e-9
+    map_h = float(np.clip(9.6 * dy / dx, 1.0, 2.2)) if bends else 0.0
+    fig = Figure(figsize=(11.0, n * (panel_h + 0.32) + 1.9 + (map_h + 0.4 if bends else 0.0)),
+                 layout="constrained")
+    if bends:
+        grid = fig.subplots(n + 1, 1, squeeze=False,
+                            height_ratios=[map_h + 0.2] + [panel_h + 0.32] * n)[:, 0]
+        _draw_road_map(grid[0], corridor, [i * step for i in range(n + 1)])
+        axes = list(grid[1:])
+    else:
+        axes = list(fig.subplots(n, 1, squeeze=False)[:, 0])
     for i, a in enumerate(axes):
         a.set_xlim(i * step - 1.0, (i + 1) * step + 1.0)
         a.set_ylim(*lat)
     return axes, _Frame(corridor, True)
+
+
+def _draw_road_map(ax: Any, corridor: Corridor, stations: list[float]) -> None:
+    """The road in x-y above a road-frame figure, with the panels' first stations marked,
+    so that the bends straightened in the panels can be found."""
+    poly = corridor.polygon()
+    ax.fill(poly[:, 0], poly[:, 1], color="#dddddd", ec=PLAN_COLOURS["edge"], lw=0.6)
+    ref = corridor.reference
+    ax.plot(ref[:, 0], ref[:, 1], color="0.5", lw=0.6, ls="--")
+    marks = corridor.to_xy(stations, np.zeros(len(stations)))
+    ax.plot(marks[:, 0], marks[:, 1], ls="none", marker="|", ms=12, mew=1.5, color="k")
+    for st, (x, y) in zip(stations, marks, strict=True):
+        ax.annotate(f"s = {st:.0f} m", (x, y), xytext=(4, 4), textcoords="offset points",
+                    fontsize="x-small")
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    pad = 0.06 * float(np.max(hi - lo))
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x [m]", fontsize="small")
+    ax.set_ylabel("y [m]", fontsize="small")
+    ax.tick_params(labelsize="x-small")
+    ax.set_title("the road in x-y (panels below start at the marked stations)",
+                 fontsize="small")
+    ax.set_gid("road_map")
 
 
 def _lateral_span(corridor: Corridor) -> tuple[float, float]:
@@ -632,7 +672,7 @@ def _legend(axes: list[Any]) -> None:
     hmap: dict[Any, Any] = {h: _GradientLine() for h in handles
                             if isinstance(h, LineCollection) and h.get_array() is not None}
     own = len(axes) == len([a for a in fig.axes if not hasattr(a, "_colorbar")
-                            and a.get_gid() != "overview"])
+                            and a.get_gid() not in ("overview", "road_map")])
     if own and fig.get_layout_engine() is not None:
         fig.legend(handles, labels, loc="outside lower center", ncol=4, fontsize="small",
                    frameon=False, handler_map=hmap)

@@ -357,7 +357,8 @@ def test_long_plans_are_drawn_in_the_road_frame_in_panels(
     ax = plot_trajectory(tr, corridor, obstacles, result.roadmaps, footprint_every=10.0,
                          s_max=13.89, path=tmp_path / "long.png")
     panels = [a for a in ax.figure.axes if not hasattr(a, "_colorbar")]
-    assert len(panels) == int(np.ceil(corridor.length / PANEL_LENGTH))
+    assert len(panels) == int(np.ceil(corridor.length / PANEL_LENGTH))  # a straight road:
+    assert not [a for a in panels if a.get_gid() == "road_map"]  # no map of its bends
     spans = np.array([a.get_xlim() for a in panels])
     assert np.all(np.diff(spans, axis=1) <= PANEL_LENGTH + 2.0 + 1e-9)
     assert spans[0, 0] <= 0.0 and spans[-1, 1] >= corridor.length
@@ -401,3 +402,24 @@ def test_bench_travel_time_tells_drivers_apart_with_one_seed() -> None:
     legend = ax.figure.legends[0]
     labels = [t.get_text() for t in legend.get_texts()]
     assert {"splineplan: median", "SUMO default: median", "SUMO sublane: each run"} <= set(labels)
+
+
+def test_a_long_bending_plan_gets_a_map_of_the_road_above_its_panels() -> None:
+    from splineplan.network import load_network
+    from splineplan.obstacles import Obstacles
+    from splineplan.pipeline import plan
+    from splineplan.plot import PANEL_LENGTH
+
+    net = load_network(NETS / "curved.net.xml")
+    result = plan(net, "s0", "s1", Obstacles.empty())
+    corridor = result.corridor
+    ax = plot_roadmap(result.roadmaps, corridor, Obstacles.empty())
+    axes = [a for a in ax.figure.axes if not hasattr(a, "_colorbar")]
+    (road_map,) = [a for a in axes if a.get_gid() == "road_map"]
+    assert len(axes) - 1 == int(np.ceil(corridor.length / PANEL_LENGTH))
+    # the map shows the whole road in x-y (the 90-degree bend), above the panels
+    poly = corridor.polygon()
+    (x0, x1), (y0, y1) = road_map.get_xlim(), road_map.get_ylim()
+    assert x0 <= poly[:, 0].min() and x1 >= poly[:, 0].max()
+    assert y0 <= poly[:, 1].min() and y1 >= poly[:, 1].max()
+    assert axes.index(road_map) == 0
