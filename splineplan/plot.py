@@ -112,7 +112,7 @@ def route_view(points: Any, network_bounds: tuple[float, float, float, float], *
 
 def plot_route(network: RoadNetwork, route: Route, ax: Any = None, *,
                path: str | PathLike[str] | None = None, title: str | None = None,
-               also_show: Any = None) -> Any:
+               also_show: Any = None, legend: bool = True) -> Any:
     """Draw ``route`` on the network around it; write it to ``path`` if given.
 
     The view is :func:`route_view` of the route (and of the points ``also_show`` ``(n, 2)``,
@@ -120,7 +120,8 @@ def plot_route(network: RoadNetwork, route: Route, ax: Any = None, *,
     translucent band along the centre of each edge's lanes and the junction lanes between
     them, start and goal marked. When the view is a small part of the network, an overview
     (gid ``overview``) shows the whole network with the route and the view's outline.
-    Returns the axes; the route band has gid ``route``.
+    With ``legend=False`` the caller adds the legend (after drawing more). Returns the
+    axes; the route band has gid ``route``.
     """
     from splineplan.network import route_corridor
 
@@ -147,8 +148,9 @@ def plot_route(network: RoadNetwork, route: Route, ax: Any = None, *,
     ax.set_title(title or f"{network.path.name}: {route.edges[0]} -> {route.edges[-1]} "
                  f"({route.vclass}, by {route.weight})")
     _draw_overview(ax, network, ref, view, pts)
-    if path is not None:
+    if legend:
         _legend([ax])
+    if path is not None:
         _save(ax, path)
     return ax
 
@@ -799,7 +801,7 @@ def run_figures(run_dir: str | PathLike[str]) -> dict[str, Any]:
             s_max = s_max or sc.trajectory.s_max
             head = (f"{name}: route and driven path ({metrics.get('driver')}, {status})"
                     if moved else f"{name}: planned route; not driven ({status})")
-            ax = plot_route(net, route, title=_title(head, why),
+            ax = plot_route(net, route, title=_title(head, why), legend=False,
                             also_show=np.column_stack((driven.x, driven.y)) if moved else None)
         except (SplineplanError, OSError, KeyError, AttributeError) as err:
             log.warning("no network picture for %s: %s", run, err)
