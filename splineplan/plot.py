@@ -317,13 +317,12 @@ def plot_roadmap(
     intervals: list[Any] = []
     for rm in maps:
         shift = _station_shift(rm, corridor)
-        lines, first = np.unique(rm.graph_line, return_index=True)
+        first = np.unique(rm.graph_line, return_index=True)[1]
         s_line = rm.graph_s[first] + shift
         lo, hi = corridor.bounds_at(s_line)
         sweep.extend(np.stack((fr.sl(s_line, lo), fr.sl(s_line, hi)), axis=1))
         s_v = rm.graph_s + shift
         intervals.extend(np.stack((fr.sl(s_v, rm.graph_lo), fr.sl(s_v, rm.graph_hi)), axis=1))
-        del lines
     arcs = np.concatenate([fr.xy(rm.graph_xy[rm.arcs]) for rm in maps])
     gxy = fr.xy(np.concatenate([rm.graph_xy for rm in maps]))
     pxy = fr.xy(np.concatenate([rm.xy for rm in maps]))
