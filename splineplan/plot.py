@@ -169,15 +169,11 @@ def _draw_overview(ax: Any, network: RoadNetwork, ref: Any,
     vw, vh = view[1] - view[0], view[3] - view[2]
     if vw * vh >= OVERVIEW_BELOW * nw * nh:
         return
-    # the inset keeps the network's aspect within the axes' box (axes fractions)
+    # the inset, in fractions of the axes, keeps the network's aspect: h / w in axes
+    # fractions is the network's height / width over the view's
     side = 0.32
-    ax_aspect = vh / vw  # height / width of the axes box (equal aspect)
-    w, h = (side, side * (nh / nw) / ax_aspect) if nw / nh >= ax_aspect ** -1 else \
-        (side * (nw / nh) * ax_aspect, side)
-    if h > side:
-        w, h = w * side / h, side
-    if w > side:
-        w, h = side, h * side / w
+    ratio = (nh / nw) * (vw / vh)
+    w, h = (side / ratio, side) if ratio > 1.0 else (side, side * ratio)
     frac = (np.asarray(pts, dtype=float) - [view[0], view[2]]) / [vw, vh]
     corners = [(0.01, 0.01), (0.99 - w, 0.01), (0.01, 0.99 - h), (0.99 - w, 0.99 - h)]
     hits = [int(np.sum((frac[:, 0] >= x - 0.03) & (frac[:, 0] <= x + w + 0.03)
