@@ -370,6 +370,8 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         raise ScenarioError(f"{run} holds neither plan.json nor metrics.json")
     for f in written:
         print(f)
+    if not written:
+        print(f"{run}: nothing to draw (see the warnings)")
     return 0
 
 def _add_simulate(sub: argparse._SubParsersAction) -> None:
@@ -483,7 +485,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
         from splineplan.plot import plot_trajectory
 
         plot_trajectory(tr, result.corridor, obstacles, list(result.roadmaps),
-                        path=_make_parent(picture))
+                        path=_make_parent(picture), s_max=tp.s_max)
     print(f"route: {' '.join(result.route.edges)} ({result.route.length:.1f} m)")
     if result.blocked:
         print(f"closed and avoided: {' '.join(result.blocked)}")

@@ -1,10 +1,29 @@
 """Pictures of networks, routes and plans (matplotlib, Agg backend).
 
 Imported by no planning code. Each function draws on a given axes or writes a file.
+
+Choices that make the pictures readable (see README.md, "Figures"):
+
+- a route is shown zoomed to itself with some of the network around it
+  (:func:`route_view`), with an overview of the whole network in a corner when the view
+  is much smaller than the network;
+- the planned route is a wide translucent band under the driven path, which is a thin
+  line coloured by speed; legend entries look like what is drawn;
+- a plan on a corridor longer than :data:`ROAD_FRAME_FROM` is drawn in the road's own frame
+  (station along the road against lateral offset), in stacked panels of at most
+  :data:`PANEL_LENGTH` metres, at true scale; shorter plans are drawn in x-y;
+- speed colours always span 0 .. ``s_max``, so the same colour is the same speed in every
+  picture.
 """
 
 from __future__ import annotations
 
+import logging
+import math
+import textwrap
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from os import PathLike
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -12,77 +31,208 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
-from matplotlib.collections import LineCollection
+import numpy as np
+from matplotlib.collections import LineCollection, PolyCollection
+from matplotlib.colors import Normalize
+from matplotlib.figure import Figure
+from matplotlib.legend_handler import HandlerBase
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch, Rectangle
 
 if TYPE_CHECKING:
+    from splineplan.corridor import Corridor
     from splineplan.network import RoadNetwork
+    from splineplan.obstacles import Obstacles
+    from splineplan.roadmap import Roadmap
     from splineplan.route import Route
+
+log = logging.getLogger(__name__)
+
+#: A route's view is its bounding box grown by this fraction of its larger side ...
+ROUTE_PAD_FRACTION = 0.2
+#: ... and by at least this much [m] on each side.
+ROUTE_PAD_MIN = 150.0
+#: An overview of the whole network is added when the view shows less than this fraction
+#: of the network's bounding box (by area).
+OVERVIEW_BELOW = 0.25
+#: A road-frame figure whose road turns by more than this [rad] gets a map of the road in
+#: x-y on top.
+BENDS_FROM = 0.35
+#: Corridors longer than this [m] are drawn in the road's frame, in stacked panels ...
+ROAD_FRAME_FROM = 200.0
+#: ... of at most this much road [m] each.
+PANEL_LENGTH = 125.0
+
+#: The planned route: a wide translucent band (colour, line width [pt], alpha).
+ROUTE_BAND = ("tab:blue", 9.0, 0.35)
+#: Colour map of speed [m/s] (0 .. s_max).
+SPEED_CMAP = "viridis"
 
 
 def plot_network(network: RoadNetwork, ax: Any = None, *, color: str = "0.75",
-                 linewidth: float = 0.8) -> Any:
-    """Draw every lane centre line of ``network`` on ``ax`` (a new one if ``None``)."""
+                 linewidth: float = 0.8, fit: bool = True) -> Any:
+    """Draw every lane centre line of ``network`` on ``ax`` (a new one if ``None``).
+
+    With ``fit`` the axes' limits are set to the whole network.
+    """
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 8))
-    segs = [ln.shape for lanes in network.lanes for ln in lanes if len(ln.shape) >= 2]
-    segs += [ln.shape for ln in network.internal_lanes.values() if len(ln.shape) >= 2]
-    ax.add_collection(LineCollection(segs, colors=color, linewidths=linewidth,
-                                     label="lanes", zorder=1))
-    xmin, ymin, xmax, ymax = network.bounds
-    pad = 0.03 * max(xmax - xmin, ymax - ymin, 1.0)
-    ax.set_xlim(xmin - pad, xmax + pad)
-    ax.set_ylim(ymin - pad, ymax + pad)
+    ax.add_collection(LineCollection(_lane_lines(network), colors=color, linewidths=linewidth,
+                                     label="lanes", zorder=1, gid="lanes"))
+    if fit:
+        xmin, ymin, xmax, ymax = network.bounds
+        pad = 0.03 * max(xmax - xmin, ymax - ymin, 1.0)
+        ax.set_xlim(xmin - pad, xmax + pad)
+        ax.set_ylim(ymin - pad, ymax + pad)
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     return ax
 
 
-def plot_route(network: RoadNetwork, route: Route, ax: Any = None, *,
-               path: str | Path | None = None, title: str | None = None) -> Any:
-    """Draw ``route`` on the whole network; write it to ``path`` if given.
+def route_view(points: Any, network_bounds: tuple[float, float, float, float], *,
+               pad_fraction: float = ROUTE_PAD_FRACTION,
+               pad_min: float = ROUTE_PAD_MIN) -> tuple[float, float, float, float]:
+    """Axes limits ``(xmin, xmax, ymin, ymax)`` [m] that show ``points`` ``(n, 2)`` in context.
 
-    The route follows the centre of each edge's lanes and the junction lanes between
-    them; start and goal are marked. Returns the axes.
+    The points' bounding box grown on each side by ``pad_fraction`` of its larger side and
+    at least ``pad_min`` [m], cut to the network's bounding box (with a 3 % margin), so a
+    route on a large network is seen closely and a route across a small one shows it all.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = max(pad_fraction * float(np.max(hi - lo)), pad_min)
+    nx0, ny0, nx1, ny1 = network_bounds
+    m = 0.03 * max(nx1 - nx0, ny1 - ny0, 1.0)
+    x0, x1 = max(lo[0] - pad, nx0 - m), min(hi[0] + pad, nx1 + m)
+    y0, y1 = max(lo[1] - pad, ny0 - m), min(hi[1] + pad, ny1 + m)
+    # never cut the points themselves (a route may run outside the network's bounds)
+    return (min(x0, lo[0]), max(x1, hi[0]), min(y0, lo[1]), max(y1, hi[1]))
+
+
+def plot_route(network: RoadNetwork, route: Route, ax: Any = None, *,
+               path: str | PathLike[str] | None = None, title: str | None = None,
+               also_show: Any = None, legend: bool = True) -> Any:
+    """Draw ``route`` on the network around it; write it to ``path`` if given.
+
+    The view is :func:`route_view` of the route (and of the points ``also_show`` ``(n, 2)``,
+    e.g. a driven path); the network is drawn in light grey, the route as a wide
+    translucent band along the centre of each edge's lanes and the junction lanes between
+    them, start and goal marked. When the view is a small part of the network, an overview
+    (gid ``overview``) shows the whole network with the route and the view's outline.
+    With ``legend=False`` the caller adds the legend (after drawing more). Returns the
+    axes; the route band has gid ``route``.
     """
     from splineplan.network import route_corridor
 
-    own = ax is None
-    if own:
-        fig, ax = plt.subplots(figsize=(8, 8))
-    else:
-        fig = ax.figure
-    plot_network(network, ax)
     ref = route_corridor(network, route).reference
-    ax.plot(ref[:, 0], ref[:, 1], color="tab:blue", linewidth=2.5, zorder=3,
-            label=f"route ({len(route.edges)} edges, {route.length:.0f} m)")
-    ax.plot(*ref[0], marker="o", color="tab:green", markersize=9, zorder=4,
-            linestyle="none", label=f"start: {route.edges[0]}")
-    ax.plot(*ref[-1], marker="*", color="tab:red", markersize=13, zorder=4,
-            linestyle="none", label=f"goal: {route.edges[-1]}")
+    pts = ref if also_show is None or len(also_show) == 0 else np.concatenate(
+        (ref, np.asarray(also_show, dtype=float).reshape(-1, 2)))
+    view = route_view(pts, network.bounds)
+    if ax is None:
+        ratio = (view[3] - view[2]) / max(view[1] - view[0], 1e-9)
+        ax = Figure(figsize=(9.0, float(np.clip(7.6 * ratio + 1.8, 4.5, 10.5))),
+                    layout="constrained").add_subplot()
+    plot_network(network, ax, color="0.78", linewidth=0.9, fit=False)
+    ax.set_xlim(view[0], view[1])
+    ax.set_ylim(view[2], view[3])
+    ax.set_aspect("equal", adjustable="box")
+    c, lw, alpha = ROUTE_BAND
+    ax.plot(ref[:, 0], ref[:, 1], color=c, linewidth=lw, alpha=alpha, zorder=3,
+            solid_capstyle="round", solid_joinstyle="round", gid="route",
+            label=f"planned route ({len(route.edges)} edges, {route.length:.0f} m)")
+    ax.plot(*ref[0], marker="o", color="tab:green", mec="k", markersize=10, zorder=6,
+            linestyle="none", gid="start", label=f"start: {route.edges[0]}")
+    ax.plot(*ref[-1], marker="*", color="tab:red", mec="k", markersize=15, zorder=6,
+            linestyle="none", gid="goal", label=f"goal: {route.edges[-1]}")
     ax.set_title(title or f"{network.path.name}: {route.edges[0]} -> {route.edges[-1]} "
                  f"({route.vclass}, by {route.weight})")
-    ax.legend(loc="best", fontsize="small")
+    _draw_overview(ax, network, ref, view, pts)
+    if legend:
+        _legend([ax])
     if path is not None:
-        fig.savefig(path, dpi=120, bbox_inches="tight")
-        if own:
-            plt.close(fig)
+        _save(ax, path)
     return ax
 
 
+def _lane_lines(network: RoadNetwork) -> list[Any]:
+    segs = [ln.shape for lanes in network.lanes for ln in lanes if len(ln.shape) >= 2]
+    segs += [ln.shape for ln in network.internal_lanes.values() if len(ln.shape) >= 2]
+    return segs
+
+
+def _draw_overview(ax: Any, network: RoadNetwork, ref: Any,
+                   view: tuple[float, float, float, float], pts: Any) -> None:
+    """The whole network in a corner of ``ax``, with the route and the view's outline."""
+    nx0, ny0, nx1, ny1 = network.bounds
+    nw, nh = max(nx1 - nx0, 1.0), max(ny1 - ny0, 1.0)
+    vw, vh = view[1] - view[0], view[3] - view[2]
+    if vw * vh >= OVERVIEW_BELOW * nw * nh:
+        return
+    # the inset, in fractions of the axes, keeps the network's aspect: h / w in axes
+    # fractions is the network's height / width over the view's
+    side = 0.32
+    ratio = (nh / nw) * (vw / vh)
+    w, h = (side / ratio, side) if ratio > 1.0 else (side, side * ratio)
+    frac = (np.asarray(pts, dtype=float) - [view[0], view[2]]) / [vw, vh]
+    corners = [(0.01, 0.01), (0.99 - w, 0.01), (0.01, 0.99 - h), (0.99 - w, 0.99 - h)]
+    hits = [int(np.sum((frac[:, 0] >= x - 0.03) & (frac[:, 0] <= x + w + 0.03)
+                       & (frac[:, 1] >= y - 0.03) & (frac[:, 1] <= y + h + 0.03)))
+            for x, y in corners]
+    x, y = corners[int(np.argmin(hits))]
+    ins = ax.inset_axes((x, y, w, h), gid="overview", zorder=10)
+    ins.add_collection(LineCollection(_lane_lines(network), colors="0.6", linewidths=0.3))
+    ins.plot(ref[:, 0], ref[:, 1], color=ROUTE_BAND[0], lw=2.0)
+    ins.add_patch(Rectangle((view[0], view[2]), vw, vh, fill=False, ec="k", lw=1.0))
+    ins.set_xlim(nx0, nx1)
+    ins.set_ylim(ny0, ny1)
+    ins.set_aspect("equal", adjustable="datalim")
+    ins.set_xticks([])
+    ins.set_yticks([])
+    ins.set_facecolor("white")
+    ins.text(0.02, 0.98, "whole network", transform=ins.transAxes, ha="left", va="top",
+             fontsize="x-small")
+
+
+class _GradientLine(HandlerBase):
+    """Legend entry of a line coloured by a colour map along its length, as it is drawn."""
+
+    def create_artists(self, legend: Any, orig_handle: Any, xdescent: float, ydescent: float,
+                       width: float, height: float, fontsize: float, trans: Any) -> list[Any]:
+        x = np.linspace(-xdescent, width - xdescent, 13)
+        y = np.full_like(x, height / 2.0 - ydescent)
+        pts = np.column_stack((x, y))
+        lc = LineCollection(list(np.stack((pts[:-1], pts[1:]), axis=1)), cmap=orig_handle.cmap,
+                            norm=Normalize(0.0, 1.0), transform=trans,
+                            linewidths=orig_handle.get_linewidth())
+        lc.set_array(np.linspace(0.15, 0.95, 12))
+        return [lc]
+
+
+def _speed_line(xy: Any, speed: Any, s_max: float, *, lw: float, gid: str, zorder: float,
+                label: str | None) -> LineCollection:
+    """A polyline ``(n, 2)`` coloured by speed [m/s] on the fixed scale 0 .. ``s_max``."""
+    pts = np.asarray(xy, dtype=float)
+    v = np.asarray(speed, dtype=float)
+    lc = LineCollection(list(np.stack((pts[:-1], pts[1:]), axis=1)), cmap=SPEED_CMAP,
+                        norm=Normalize(vmin=0.0, vmax=float(s_max)), linewidths=lw,
+                        zorder=zorder, gid=gid, label=label, capstyle="round")
+    lc.set_array((v[:-1] + v[1:]) / 2.0)
+    return lc
+
+
+def _speed_scale(s_max: float | None, speed: Any) -> float:
+    """Top of the speed colour scale [m/s]: ``s_max`` when known, else the default
+    ``TrajectoryParams.s_max`` (or the fastest sample, if faster)."""
+    if s_max is not None and s_max > 0:
+        return float(s_max)
+    from splineplan.trajectory_params import TrajectoryParams
+
+    v = np.asarray(speed, dtype=float)
+    return max(TrajectoryParams().s_max, float(np.max(v)) if len(v) else 0.0)
+
+
 # ---- the paper's figures 2 and 4, and the speed profile -----------------------------------
-from collections.abc import Mapping, Sequence  # noqa: E402
-from os import PathLike  # noqa: E402
-
-import numpy as np  # noqa: E402
-from matplotlib.collections import PolyCollection  # noqa: E402
-from matplotlib.colors import Normalize  # noqa: E402
-from matplotlib.figure import Figure  # noqa: E402
-
-if TYPE_CHECKING:
-    from splineplan.corridor import Corridor
-    from splineplan.obstacles import Obstacles
-    from splineplan.roadmap import Roadmap
 
 #: Colours of the planning figures (road, obstacles, roadmap, chosen path).
 PLAN_COLOURS = {
@@ -96,6 +246,28 @@ PLAN_COLOURS = {
 }
 
 
+@dataclass(frozen=True)
+class _Frame:
+    """Where a plan figure draws: x-y [m], or the road's frame (station, lateral offset)."""
+
+    corridor: Corridor
+    road: bool
+
+    def sl(self, s: Any, l: Any) -> Any:  # noqa: E741
+        """Points ``(..., 2)`` at stations ``s`` and lateral offsets ``l`` of the corridor."""
+        if self.road:
+            s_arr, l_arr = np.broadcast_arrays(np.asarray(s, float), np.asarray(l, float))
+            return np.stack((s_arr, l_arr), axis=-1)
+        return self.corridor.to_xy(s, l)
+
+    def xy(self, points: Any) -> Any:
+        """Points ``(..., 2)`` given in x-y [m], in this frame."""
+        pts = np.asarray(points, dtype=float)
+        if not self.road or pts.size == 0:
+            return pts
+        return self.corridor.to_sl(pts.reshape(-1, 2)).reshape(pts.shape)
+
+
 def plot_roadmap(
     roadmap: Roadmap | Sequence[Roadmap],
     corridor: Corridor,
@@ -104,14 +276,15 @@ def plot_roadmap(
     *,
     path: str | PathLike[str] | None = None,
     title: str | None = "Roadmap: sweep lines, free intervals and the widest path",
+    frame: str = "auto",
 ) -> Any:
     """The paper's Fig. 2: sweep lines, free intervals, the roadmap graph, the chosen path.
 
     Sweep lines cross the road at each station of the graph; the free intervals are those
     of the grown obstacles (so a vertex anywhere on one keeps the ego clear); arcs join the
     vertices of consecutive lines; the chosen widest-then-shortest path is drawn on top
-    with its bottleneck (narrowest vertex) marked. Several roadmaps (one per road segment)
-    are drawn together.
+    with its bottleneck (narrowest vertex) marked. Several roadmaps (one per road segment,
+    each with stations from its segment's start) are drawn together along ``corridor``.
 
     Parameters
     ----------
@@ -123,54 +296,59 @@ def plot_roadmap(
         Axes to draw into; a new figure when ``None``.
     path
         Where to save the figure (format from the suffix), if given.
+    frame
+        ``"xy"``, ``"road"`` (station against lateral offset, stacked panels of at most
+        :data:`PANEL_LENGTH` m when ``ax`` is ``None``) or ``"auto"`` (the road's frame
+        for corridors longer than :data:`ROAD_FRAME_FROM` m).
 
     Returns
     -------
-    The axes; artists carry gids ``sweep_lines``, ``free_intervals``, ``roadmap_arcs``,
-    ``roadmap_vertices``, ``widest_path``, ``bottleneck``.
+    The axes (the first panel's; all are in ``ax.figure.axes``); artists carry gids
+    ``sweep_lines``, ``free_intervals``, ``roadmap_arcs``, ``roadmap_vertices``,
+    ``widest_path``, ``bottleneck``.
     """
     maps = _roadmap_list(roadmap)
-    ax = _plan_axes(ax, corridor)
-    _draw_road(ax, corridor)
-    _draw_obstacles(ax, obstacles)
-    sweep: list[np.ndarray] = []
-    intervals: list[np.ndarray] = []
-    arcs: list[np.ndarray] = []
+    axes, fr = _plan_axes(ax, corridor, frame)
+    sweep: list[Any] = []
+    intervals: list[Any] = []
     for rm in maps:
-        lines, first = np.unique(rm.graph_line, return_index=True)
-        s_line = rm.graph_s[first]
+        shift = _station_shift(rm, corridor)
+        first = np.unique(rm.graph_line, return_index=True)[1]
+        s_line = rm.graph_s[first] + shift
         lo, hi = corridor.bounds_at(s_line)
-        sweep.extend(np.stack((corridor.to_xy(s_line, lo), corridor.to_xy(s_line, hi)), axis=1))
-        intervals.extend(np.stack((corridor.to_xy(rm.graph_s, rm.graph_lo),
-                                   corridor.to_xy(rm.graph_s, rm.graph_hi)), axis=1))
-        arcs.extend(rm.graph_xy[rm.arcs])
-        del lines
-    d = maps[0].params.d
-    ax.add_collection(LineCollection(sweep, colors=PLAN_COLOURS["sweep"], linewidths=0.5,
-                                     linestyles="--", gid="sweep_lines", zorder=2,
-                                     label=f"sweep lines (every {d:g} m)"))
-    ax.add_collection(LineCollection(intervals, colors=PLAN_COLOURS["interval"], linewidths=2.0,
-                                     gid="free_intervals", zorder=3, alpha=0.6,
-                                     label="free intervals (grown obstacles)"))
-    ax.add_collection(LineCollection(arcs, colors=PLAN_COLOURS["graph"], linewidths=0.6,
-                                     gid="roadmap_arcs", zorder=4, alpha=0.7,
-                                     label="roadmap arcs"))
-    gxy = np.concatenate([rm.graph_xy for rm in maps])
-    ax.scatter(gxy[:, 0], gxy[:, 1], s=6, color=PLAN_COLOURS["graph"], zorder=5,
-               gid="roadmap_vertices", label="roadmap vertices (interval midpoints)")
-    pxy = np.concatenate([rm.xy for rm in maps])
+        sweep.extend(np.stack((fr.sl(s_line, lo), fr.sl(s_line, hi)), axis=1))
+        s_v = rm.graph_s + shift
+        intervals.extend(np.stack((fr.sl(s_v, rm.graph_lo), fr.sl(s_v, rm.graph_hi)), axis=1))
+    arcs = np.concatenate([fr.xy(rm.graph_xy[rm.arcs]) for rm in maps])
+    gxy = fr.xy(np.concatenate([rm.graph_xy for rm in maps]))
+    pxy = fr.xy(np.concatenate([rm.xy for rm in maps]))
     worst = min(maps, key=lambda rm: rm.bottleneck_width)
-    ax.plot(pxy[:, 0], pxy[:, 1], color=PLAN_COLOURS["path"], lw=2.0, zorder=6,
-            gid="widest_path", label="chosen widest path")
-    bxy = worst.xy[worst.bottleneck_index]
-    ax.plot([bxy[0]], [bxy[1]], marker="*", ms=14, color="gold", mec="k", ls="none",
-            zorder=7, gid="bottleneck",
-            label=f"bottleneck: free width {worst.bottleneck_width:.2f} m")
-    st = maps[0].start_xy
-    ax.plot([st[0]], [st[1]], marker="o", ms=7, color="k", ls="none", zorder=7, gid="start",
-            label="start")
-    _finish(ax, title, path)
-    return ax
+    bxy = fr.xy(worst.xy[worst.bottleneck_index][None])[0]
+    st = fr.xy(maps[0].start_xy[None])[0]
+    d = maps[0].params.d
+    for a in axes:
+        _draw_road(a, fr)
+        _draw_obstacles(a, obstacles, fr)
+        a.add_collection(LineCollection(sweep, colors=PLAN_COLOURS["sweep"], linewidths=0.5,
+                                        linestyles="--", gid="sweep_lines", zorder=2,
+                                        label=f"sweep lines (every {d:g} m)"))
+        a.add_collection(LineCollection(intervals, colors=PLAN_COLOURS["interval"],
+                                        linewidths=2.0, gid="free_intervals", zorder=3,
+                                        alpha=0.6, label="free intervals (grown obstacles)"))
+        a.add_collection(LineCollection(list(arcs), colors=PLAN_COLOURS["graph"],
+                                        linewidths=0.6, gid="roadmap_arcs", zorder=4,
+                                        alpha=0.7, label="roadmap arcs"))
+        a.scatter(gxy[:, 0], gxy[:, 1], s=6, color=PLAN_COLOURS["graph"], zorder=5,
+                  gid="roadmap_vertices", label="roadmap vertices (interval midpoints)")
+        a.plot(pxy[:, 0], pxy[:, 1], color=PLAN_COLOURS["path"], lw=2.0, zorder=6,
+               gid="widest_path", label="chosen widest path")
+        a.plot([bxy[0]], [bxy[1]], marker="*", ms=14, color="gold", mec="k", ls="none",
+               zorder=7, gid="bottleneck",
+               label=f"bottleneck: free width {worst.bottleneck_width:.2f} m")
+        a.plot([st[0]], [st[1]], marker="o", ms=7, color="k", ls="none", zorder=7,
+               gid="start", label="start")
+    _finish(axes, fr, title, path)
+    return axes[0]
 
 
 def plot_trajectory(
@@ -183,8 +361,10 @@ def plot_trajectory(
     path: str | PathLike[str] | None = None,
     footprint_every: float | None = None,
     vehicle_size: tuple[float, float] | None = None,
-    cmap: str = "viridis",
+    s_max: float | None = None,
+    cmap: str = SPEED_CMAP,
     title: str | None = "Trajectory coloured by speed",
+    frame: str = "auto",
 ) -> Any:
     """The paper's Fig. 4: road segment, obstacles, roadmap and the trajectory by speed.
 
@@ -205,52 +385,67 @@ def plot_trajectory(
         Draw the vehicle's outline every so many metres [m] along the curve.
     vehicle_size
         Length and width [m] of the outline (default: the roadmap's vehicle, else 4.5 x 1.8).
+    s_max
+        Top of the speed colour scale [m/s], the trajectory's speed limit (default:
+        :func:`_speed_scale`); the scale starts at 0, so colours mean the same speed in
+        every picture.
     cmap
         Colour map of the speed.
+    frame
+        ``"xy"``, ``"road"`` or ``"auto"``, as in :func:`plot_roadmap`.
 
     Returns
     -------
-    The axes; the curve is a LineCollection with gid ``trajectory_speed`` (its colour
-    scale spans the speed range; a colour bar is added), over a thin Line2D with gid
-    ``trajectory`` whose data are the trajectory's x and y.
+    The axes (the first panel's); the curve is a LineCollection with gid
+    ``trajectory_speed`` (colour scale 0 .. ``s_max``, with a colour bar), over a thin
+    Line2D with gid ``trajectory`` whose data are the trajectory's points in the frame
+    drawn (x and y in ``"xy"``).
     """
     maps = _roadmap_list(roadmap) if roadmap is not None else []
-    ax = _plan_axes(ax, corridor)
-    _draw_road(ax, corridor)
-    _draw_obstacles(ax, obstacles)
+    axes, fr = _plan_axes(ax, corridor, frame)
     x = np.asarray(trajectory.x, dtype=float)
     y = np.asarray(trajectory.y, dtype=float)
     v = np.asarray(trajectory.speed, dtype=float)
-    for i, rm in enumerate(maps):
-        ax.plot(rm.xy[:, 0], rm.xy[:, 1], ls=":", marker="o", ms=3, lw=0.8,
-                color=PLAN_COLOURS["graph"], zorder=4, gid="roadmap_path",
-                label="roadmap (level 2)" if i == 0 else None)
+    top = _speed_scale(s_max, v)
+    pts = fr.xy(np.column_stack((x, y)))
+    rms = [fr.xy(rm.xy) for rm in maps]
     cp = getattr(trajectory, "control_points", None)
-    if cp is not None and len(cp):
-        cp = np.asarray(cp, dtype=float)
-        ax.plot(cp[:, 0], cp[:, 1], ls="none", marker="x", ms=4, color="#7b1fa2", zorder=5,
-                gid="control_points", label="spline control points")
+    cp = fr.xy(np.asarray(cp, dtype=float)) if cp is not None and len(cp) else None
+    feet = None
     if footprint_every:
         if vehicle_size is None:
             vehicle_size = ((maps[0].params.vehicle_length, maps[0].params.vehicle_width)
                             if maps else (4.5, 1.8))
-        _draw_footprints(ax, trajectory, footprint_every, vehicle_size)
-    ax.plot(x, y, color="k", lw=0.6, zorder=6, gid="trajectory", label="trajectory (level 3)")
-    pts = np.column_stack((x, y))
-    segs = np.stack((pts[:-1], pts[1:]), axis=1)
-    norm = Normalize(vmin=float(v.min()), vmax=float(v.max()))
-    lc = LineCollection(list(segs), cmap=cmap, norm=norm, linewidths=3.0, zorder=7,
-                        gid="trajectory_speed")
-    lc.set_array((v[:-1] + v[1:]) / 2.0)
-    ax.add_collection(lc)
-    ax.plot([x[0]], [y[0]], marker="o", color="k", ms=6, ls="none", zorder=8, gid="start",
-            label="start")
-    ax.plot([x[-1]], [y[-1]], marker="s", color="k", ms=6, ls="none", zorder=8, gid="end",
-            label="end")
-    cb = ax.figure.colorbar(lc, ax=ax, fraction=0.03, pad=0.02)
+        feet = fr.xy(_footprints(trajectory, footprint_every, vehicle_size))
+    lc = None
+    for a in axes:
+        _draw_road(a, fr)
+        _draw_obstacles(a, obstacles, fr)
+        for i, r in enumerate(rms):
+            a.plot(r[:, 0], r[:, 1], ls=":", marker="o", ms=3, lw=0.8,
+                   color=PLAN_COLOURS["graph"], zorder=4, gid="roadmap_path",
+                   label="roadmap (level 2)" if i == 0 else None)
+        if cp is not None:
+            a.plot(cp[:, 0], cp[:, 1], ls="none", marker="x", ms=4, color="#7b1fa2",
+                   zorder=5, gid="control_points", label="spline control points")
+        if feet is not None:
+            a.add_collection(PolyCollection(list(feet), facecolors="none",
+                                            edgecolors="#424242", linewidths=0.5, zorder=5,
+                                            gid="footprints",
+                                            label=f"vehicle every {footprint_every:g} m"))
+        a.plot(pts[:, 0], pts[:, 1], color="k", lw=0.6, zorder=6, gid="trajectory")
+        lc = _speed_line(pts, v, top, lw=3.0, gid="trajectory_speed", zorder=7,
+                         label="trajectory (level 3), coloured by speed")
+        lc.set_cmap(cmap)
+        a.add_collection(lc)
+        a.plot([pts[0, 0]], [pts[0, 1]], marker="o", color="k", ms=6, ls="none", zorder=8,
+               gid="start", label="start")
+        a.plot([pts[-1, 0]], [pts[-1, 1]], marker="s", color="k", ms=6, ls="none", zorder=8,
+               gid="end", label="end")
+    cb = axes[0].figure.colorbar(lc, ax=list(axes), fraction=0.03, pad=0.02)
     cb.set_label("speed [m/s]")
-    _finish(ax, title, path)
-    return ax
+    _finish(axes, fr, title, path)
+    return axes[0]
 
 
 def plot_speed_profile(
@@ -302,7 +497,7 @@ def plot_speed_profile(
     ax.set_xlabel("distance along the trajectory s [m]")
     ax.set_ylabel("speed [m/s]")
     ax.grid(True, lw=0.3, alpha=0.5)
-    _legend(ax)
+    _legend([ax])
     if title:
         ax.set_title(title)
     if path is not None:
@@ -320,35 +515,114 @@ def _roadmap_list(roadmap: Roadmap | Sequence[Roadmap]) -> list[Roadmap]:
     return maps
 
 
-def _plan_axes(ax: Any, corridor: Corridor) -> Any:
+def _station_shift(rm: Roadmap, corridor: Corridor) -> float:
+    """Station [m] on ``corridor`` of the roadmap's station 0: a road segment's roadmap
+    counts its stations from the segment's start."""
+    if len(rm.graph_xy) == 0:
+        return 0.0
+    s_on = corridor.to_sl(rm.graph_xy)[:, 0]
+    return float(np.median(s_on - rm.graph_s))
+
+
+def _plan_axes(ax: Any, corridor: Corridor, frame: str) -> tuple[list[Any], _Frame]:
+    """The axes of a plan figure and its frame: one x-y axes for a compact plan, stacked
+    panels in the road's frame for a long one (see the module's docstring)."""
+    if frame not in ("auto", "xy", "road"):
+        raise ValueError(f"frame must be 'auto', 'xy' or 'road', not {frame!r}")
     if ax is not None:
-        return ax
+        return [ax], _Frame(corridor, frame == "road")
+    road = frame == "road" or (frame == "auto" and corridor.length > ROAD_FRAME_FROM)
+    if not road:
+        poly = corridor.polygon()
+        dx, dy = np.ptp(poly, axis=0) + 1e-9
+        width = 11.0
+        height = float(np.clip(width * dy / dx + 1.8, 3.0, 9.0))
+        return [Figure(figsize=(width, height), layout="constrained").add_subplot()], \
+            _Frame(corridor, False)
+    n = max(1, math.ceil(corridor.length / PANEL_LENGTH - 1e-9))
+    step = corridor.length / n
+    lat = _lateral_span(corridor)
+    panel_h = 9.6 * (lat[1] - lat[0]) / (step + 2.0)
+    heading = np.unwrap(corridor.heading_at(corridor.s))
+    bends = float(np.ptp(heading)) > BENDS_FROM
     poly = corridor.polygon()
     dx, dy = np.ptp(poly, axis=0) + 1e-9
-    width = 11.0
-    height = float(np.clip(width * dy / dx + 1.8, 3.0, 9.0))
-    return Figure(figsize=(width, height), layout="constrained").add_subplot()
+    map_h = float(np.clip(9.6 * dy / dx, 1.0, 2.2)) if bends else 0.0
+    fig = Figure(figsize=(11.0, n * (panel_h + 0.32) + 1.9 + (map_h + 0.4 if bends else 0.0)),
+                 layout="constrained")
+    if bends:
+        grid = fig.subplots(n + 1, 1, squeeze=False,
+                            height_ratios=[map_h + 0.2] + [panel_h + 0.32] * n)[:, 0]
+        _draw_road_map(grid[0], corridor, [i * step for i in range(n + 1)])
+        axes = list(grid[1:])
+    else:
+        axes = list(fig.subplots(n, 1, squeeze=False)[:, 0])
+    for i, a in enumerate(axes):
+        a.set_xlim(i * step - 1.0, (i + 1) * step + 1.0)
+        a.set_ylim(*lat)
+    return axes, _Frame(corridor, True)
 
 
-def _draw_road(ax: Any, corridor: Corridor) -> None:
+def _draw_road_map(ax: Any, corridor: Corridor, stations: list[float]) -> None:
+    """The road in x-y above a road-frame figure, with the panels' first stations marked,
+    so that the bends straightened in the panels can be found."""
     poly = corridor.polygon()
+    ax.fill(poly[:, 0], poly[:, 1], color="#dddddd", ec=PLAN_COLOURS["edge"], lw=0.6)
+    ref = corridor.reference
+    ax.plot(ref[:, 0], ref[:, 1], color="0.5", lw=0.6, ls="--")
+    marks = corridor.to_xy(stations, np.zeros(len(stations)))
+    ax.plot(marks[:, 0], marks[:, 1], ls="none", marker="|", ms=12, mew=1.5, color="k")
+    for st, (x, y) in zip(stations, marks, strict=True):
+        ax.annotate(f"s = {st:.0f} m", (x, y), xytext=(4, 4), textcoords="offset points",
+                    fontsize="x-small")
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    pad = 0.06 * float(np.max(hi - lo))
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x [m]", fontsize="small")
+    ax.set_ylabel("y [m]", fontsize="small")
+    ax.tick_params(labelsize="x-small")
+    ax.set_title("the road in x-y (panels below start at the marked stations)",
+                 fontsize="small")
+    ax.set_gid("road_map")
+
+
+def _lateral_span(corridor: Corridor) -> tuple[float, float]:
+    lo, hi = float(np.min(corridor.right)), float(np.max(corridor.left))
+    m = max(1.0, 0.1 * (hi - lo))
+    return lo - m, hi + m
+
+
+def _draw_road(ax: Any, fr: _Frame) -> None:
+    c = fr.corridor
+    right, left = fr.sl(c.s, c.right), fr.sl(c.s, c.left)
+    poly = np.concatenate((right, left[::-1]))
     ax.fill(poly[:, 0], poly[:, 1], color=PLAN_COLOURS["road"], zorder=0, gid="road",
             label="road")
-    for i, b in enumerate((corridor.left_xy(), corridor.right_xy())):
+    for i, b in enumerate((left, right)):
         ax.plot(b[:, 0], b[:, 1], color=PLAN_COLOURS["edge"], lw=1.2, zorder=1,
                 gid="road_edge", label="road edge" if i == 0 else None)
 
 
-def _draw_obstacles(ax: Any, obstacles: Obstacles) -> None:
+def _draw_obstacles(ax: Any, obstacles: Obstacles, fr: _Frame) -> None:
     if len(obstacles) == 0:
         return
-    ax.add_collection(PolyCollection(obstacles.polygons(), facecolors=PLAN_COLOURS["obstacle"],
+    polys = [fr.xy(p) for p in obstacles.polygons()]
+    if fr.road:  # only those beside the road: the projection of far ones means nothing
+        lat = _lateral_span(fr.corridor)
+        reach = lat[1] - lat[0]
+        polys = [p for p in polys if np.any((p[:, 0] > -5.0)
+                                            & (p[:, 0] < fr.corridor.length + 5.0)
+                                            & (p[:, 1] > lat[0] - reach)
+                                            & (p[:, 1] < lat[1] + reach))]
+    ax.add_collection(PolyCollection(polys, facecolors=PLAN_COLOURS["obstacle"],
                                      edgecolors=PLAN_COLOURS["obstacle"], linewidths=0.3,
                                      zorder=2, gid="obstacles", label="obstacles"))
 
 
-def _draw_footprints(ax: Any, trajectory: Any, every: float,
-                     size: tuple[float, float]) -> None:
+def _footprints(trajectory: Any, every: float, size: tuple[float, float]) -> Any:
+    """The vehicle's outline ``(k, 4, 2)`` [m] every ``every`` metres along the curve."""
     from splineplan.geometry import box_corners
 
     s = np.asarray(trajectory.s, dtype=float)
@@ -356,34 +630,51 @@ def _draw_footprints(ax: Any, trajectory: Any, every: float,
     x = np.interp(at, s, trajectory.x)
     y = np.interp(at, s, trajectory.y)
     h = np.interp(at, s, np.unwrap(trajectory.heading))
-    corners = box_corners(np.column_stack((x, y)), h, np.full(len(at), size[0]),
-                          np.full(len(at), size[1]))
-    ax.add_collection(PolyCollection(list(corners), facecolors="none", edgecolors="#424242",
-                                     linewidths=0.5, zorder=5, gid="footprints",
-                                     label=f"vehicle every {every:g} m"))
+    return box_corners(np.column_stack((x, y)), h, np.full(len(at), size[0]),
+                       np.full(len(at), size[1]))
 
 
-def _finish(ax: Any, title: str | None, path: str | PathLike[str] | None) -> None:
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.autoscale_view()
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    if title:
-        ax.set_title(title)
-    _legend(ax)
-    if path is not None:
-        _save(ax, path)
-
-
-def _legend(ax: Any) -> None:
-    """Legend below the axes: outside the figure's plot area when the axes fill it alone."""
-    fig = ax.figure
-    if len(fig.axes) - sum(hasattr(a, "_colorbar") for a in fig.axes) <= 1 and \
-            fig.get_layout_engine() is not None:
-        fig.legend(*ax.get_legend_handles_labels(), loc="outside lower center", ncol=4,
-                   fontsize="small", frameon=False)
+def _finish(axes: list[Any], fr: _Frame, title: str | None,
+            path: str | PathLike[str] | None) -> None:
+    if fr.road:
+        for a in axes:
+            a.set_aspect("equal", adjustable="box")
+            a.set_ylabel("lateral l [m]")
+            a.tick_params(labelsize="small")
+        axes[-1].set_xlabel("station along the road s [m] (lateral offset l: left of the "
+                            "road's centre line is positive; true scale)")
     else:
-        ax.legend(loc="best", fontsize="small")
+        for a in axes:
+            a.set_aspect("equal", adjustable="datalim")
+            a.autoscale_view()
+            a.set_xlabel("x [m]")
+            a.set_ylabel("y [m]")
+    if title:
+        if len(axes) > 1:
+            axes[0].figure.suptitle(title)
+        else:
+            axes[0].set_title(title)
+    _legend(axes)
+    if path is not None:
+        _save(axes[0], path)
+
+
+def _legend(axes: list[Any]) -> None:
+    """Legend below the axes: outside the figure's plot area when the axes fill the figure
+    (one axes, or stacked panels), else inside. Lines coloured by speed get an entry
+    coloured the same way."""
+    ax = axes[0]
+    fig = ax.figure
+    handles, labels = ax.get_legend_handles_labels()
+    hmap: dict[Any, Any] = {h: _GradientLine() for h in handles
+                            if isinstance(h, LineCollection) and h.get_array() is not None}
+    own = len(axes) == len([a for a in fig.axes if not hasattr(a, "_colorbar")
+                            and a.get_gid() not in ("overview", "road_map")])
+    if own and fig.get_layout_engine() is not None:
+        fig.legend(handles, labels, loc="outside lower center", ncol=4, fontsize="small",
+                   frameon=False, handler_map=hmap)
+    else:
+        ax.legend(handles, labels, loc="best", fontsize="small", handler_map=hmap)
 
 
 def _save(ax: Any, path: str | PathLike[str]) -> None:
@@ -397,6 +688,7 @@ def _param(params: Any, name: str) -> float:
     return float(value)
 
 
+# ---- figures of run folders ----------------------------------------------------------------
 def plot_plan_folder(
     run_dir: str | PathLike[str],
     *,
@@ -406,7 +698,8 @@ def plot_plan_folder(
     """Figures of a plan folder (``plan.json``, see :mod:`splineplan.io`).
 
     Writes ``roadmap.<fmt>`` (Fig. 2), ``trajectory.<fmt>`` (Fig. 4) and ``speed.<fmt>``
-    (the speed profile with its limits). Returns the files written.
+    (the speed profile with its limits); a figure whose content the folder lacks (no
+    roadmap, no trajectory) is skipped with a warning in the log. Returns the files written.
     """
     from splineplan.io import load_plan
     from splineplan.trajectory import TrajectoryParams
@@ -418,15 +711,21 @@ def plot_plan_folder(
         p = dest / f"roadmap.{fmt}"
         plot_roadmap(saved.roadmaps, saved.corridor, saved.obstacles, path=p)
         written.append(str(p))
-    if saved.trajectory is not None:
+    else:
+        log.warning("%s holds no roadmap: roadmap.%s not drawn", run_dir, fmt)
+    tr = saved.trajectory
+    if tr is not None and len(tr.x) >= 2:
+        params = saved.trajectory_params or TrajectoryParams()
         p = dest / f"trajectory.{fmt}"
-        plot_trajectory(saved.trajectory, saved.corridor, saved.obstacles,
-                        saved.roadmaps or None, path=p, footprint_every=10.0)
+        plot_trajectory(tr, saved.corridor, saved.obstacles, saved.roadmaps or None, path=p,
+                        footprint_every=10.0, s_max=_param(params, "s_max"))
         written.append(str(p))
         p = dest / f"speed.{fmt}"
-        plot_speed_profile(saved.trajectory, saved.trajectory_params or TrajectoryParams(),
-                           path=p)
+        plot_speed_profile(tr, params, path=p)
         written.append(str(p))
+    else:
+        log.warning("%s holds no trajectory: trajectory.%s and speed.%s not drawn", run_dir,
+                    fmt, fmt)
     return written
 
 
@@ -438,22 +737,50 @@ def plot_run_folder(
 ) -> list[str]:
     """Figures of a simulation run folder (``metrics.json``, ``trajectory.csv``).
 
-    Writes ``route.<fmt>`` (Fig. 3: the route on the whole network, with the driven path
-    coloured by speed; needs the scenario's network, else only the driven path) and
-    ``speed_time.<fmt>`` (speed over time). Returns the files written.
+    Writes ``route.<fmt>`` and ``speed_time.<fmt>`` as drawn by :func:`run_figures`; a
+    figure with nothing to draw is not written (a warning in the log says so). Returns the
+    files written.
+    """
+    dest = Path(out_dir) if out_dir is not None else Path(run_dir)
+    written: list[str] = []
+    for name, ax in run_figures(run_dir).items():
+        p = dest / f"{name}.{fmt}"
+        _save(ax, p)
+        written.append(str(p))
+    return written
+
+
+def run_figures(run_dir: str | PathLike[str]) -> dict[str, Any]:
+    """The figures of a simulation run folder, by name: ``route`` and ``speed_time`` axes.
+
+    ``route`` (Fig. 3) is the planned route on the network around it (:func:`plot_route`)
+    with the driven path coloured by speed on the scale 0 .. ``s_max`` (gid
+    ``driven_speed``); without a readable scenario network, only the driven path.
+    ``speed_time`` is the speed over time. A run that did not arrive says so in the titles,
+    with the reason from ``metrics.json``. A figure with nothing to draw (no driven path
+    and no network; no speed samples) is left out, with a warning in the log, rather than
+    drawn blank.
     """
     import json
-    import logging
 
     from splineplan.errors import SplineplanError
     from splineplan.io import read_trajectory_csv
 
-    log = logging.getLogger(__name__)
     run = Path(run_dir)
-    dest = Path(out_dir) if out_dir is not None else run
     metrics = json.loads((run / "metrics.json").read_text())
-    driven = read_trajectory_csv(run / "trajectory.csv")
-    written: list[str] = []
+    driven: Any = None
+    try:
+        driven = read_trajectory_csv(run / "trajectory.csv")
+    except SplineplanError as err:
+        log.warning("no driven path in %s: %s", run, err)
+    moved = driven is not None and len(driven.x) >= 2
+    name = metrics.get("scenario", run.name)
+    status = str(metrics.get("status") or "unknown")
+    reason = str(metrics.get("reason") or "")
+    failed = not metrics.get("arrived", status == "arrived")
+    why = reason if failed else ""
+    s_max = metrics.get("s_max")
+    figures: dict[str, Any] = {}
     ax = None
     edges = tuple(metrics.get("route") or ())
     if edges and metrics.get("scenario_file"):
@@ -466,45 +793,63 @@ def plot_run_folder(
             net = load_network(sc.network)
             route = Route(edges, float(metrics.get("route_length") or 0.0), 0.0, "length",
                           sc.ego.vclass)
-            ax = plot_route(net, route, Figure(figsize=(8, 8), layout="constrained")
-                            .add_subplot(), title=f"{metrics.get('scenario')}: route and "
-                            f"driven path ({metrics.get('driver')}, {metrics.get('status')})")
+            s_max = s_max or sc.trajectory.s_max
+            head = (f"{name}: route and driven path ({metrics.get('driver')}, {status})"
+                    if moved else f"{name}: planned route; not driven ({status})")
+            ax = plot_route(net, route, title=_title(head, why), legend=False,
+                            also_show=np.column_stack((driven.x, driven.y)) if moved else None)
         except (SplineplanError, OSError, KeyError, AttributeError) as err:
             log.warning("no network picture for %s: %s", run, err)
             ax = None
-    if ax is None:
+    fresh = ax is None
+    if ax is None and moved:
         ax = Figure(figsize=(8, 6), layout="constrained").add_subplot()
-        ax.set_title(f"{metrics.get('scenario', run.name)}: driven path")
-    if len(driven.x) > 1:
-        pts = np.column_stack((driven.x, driven.y))
-        v = driven.speed
-        lc = LineCollection(list(np.stack((pts[:-1], pts[1:]), axis=1)), cmap="viridis",
-                            norm=Normalize(float(v.min()), float(v.max())), linewidths=3.0,
-                            zorder=5, gid="driven_speed")
-        lc.set_array((v[:-1] + v[1:]) / 2.0)
-        ax.add_collection(lc)
-        ax.plot(driven.x, driven.y, color="k", lw=0.5, zorder=4, gid="driven",
-                label="driven path")
-        ax.figure.colorbar(lc, ax=ax, fraction=0.03, pad=0.02).set_label("speed [m/s]")
-        ax.autoscale_view()
-    ax.set_aspect("equal", adjustable="box")
-    ax.set_xlabel("x [m]")
-    ax.set_ylabel("y [m]")
-    ax.legend(loc="best", fontsize="small")
-    p = dest / f"route.{fmt}"
-    _save(ax, p)
-    written.append(str(p))
-    ax2 = Figure(figsize=(8.0, 3.5), layout="constrained").add_subplot()
-    ax2.plot(driven.t, driven.speed, color="#1565c0", lw=1.5, gid="speed", label="speed")
-    ax2.set_xlabel("time t [s]")
-    ax2.set_ylabel("speed [m/s]")
-    ax2.set_title(f"{metrics.get('scenario', run.name)}: speed over time")
-    ax2.grid(True, lw=0.3, alpha=0.5)
-    ax2.legend(loc="best", fontsize="small")
-    p = dest / f"speed_time.{fmt}"
-    _save(ax2, p)
-    written.append(str(p))
-    return written
+        ax.set_title(_title(f"{name}: driven path ({status})", why))
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+    if ax is None:
+        log.warning("%s: the run has no driven path and its network is not readable: no "
+                    "route figure (%s: %s)", run, status, reason)
+    else:
+        if moved:
+            top = _speed_scale(s_max, driven.speed)
+            lc = _speed_line(np.column_stack((driven.x, driven.y)), driven.speed, top, lw=2.2,
+                             gid="driven_speed", zorder=5, label="driven path, coloured by speed")
+            ax.add_collection(lc)
+            if failed:
+                ax.plot([driven.x[-1]], [driven.y[-1]], marker="X", color="k", ms=9,
+                        ls="none", zorder=7, gid="driven_end", label="where the ego stopped")
+            ax.figure.colorbar(lc, ax=ax, fraction=0.04, pad=0.02, shrink=0.8) \
+                .set_label(f"speed [m/s] (0 .. s_max = {top:.1f})")
+            if fresh:
+                ax.autoscale_view()
+        _legend([ax])
+        figures["route"] = ax
+    if moved:
+        ax2 = Figure(figsize=(8.0, 3.5), layout="constrained").add_subplot()
+        ax2.plot(driven.t, driven.speed, color="#1565c0", lw=1.5, gid="speed", label="speed")
+        if s_max:
+            ax2.axhline(float(s_max), color="#c62828", ls="--", lw=1.0, gid="s_max",
+                        label=f"$s_{{max}}$ = {float(s_max):.2f} m/s")
+        ax2.set_ylim(bottom=0.0)
+        ax2.set_xlabel("time t [s]")
+        ax2.set_ylabel("speed [m/s]")
+        ax2.set_title(_title(f"{name}: speed over time ({status})", why))
+        ax2.grid(True, lw=0.3, alpha=0.5)
+        ax2.legend(loc="best", fontsize="small")
+        figures["speed_time"] = ax2
+    else:
+        log.warning("%s: the ego did not move: no speed-over-time figure (%s: %s)", run,
+                    status, reason)
+    return figures
+
+
+def _title(head: str, reason: str) -> str:
+    """A title with the run's failure reason (if any) wrapped below it."""
+    if not reason:
+        return head
+    return head + "\n" + textwrap.fill(reason, 90)
 
 
 # ---- scenario bench ------------------------------------------------------------------------
@@ -529,7 +874,9 @@ def plot_bench(
     or time off the road, against obstacle density, per driver),
     ``bench_clearance.<fmt>`` (each run's minimum clearance [m] against density, with the
     median per tier) and ``bench_travel_time.<fmt>`` (travel time [s] of the runs that
-    arrived, by tier and driver). Density: stopped vehicles per 100 m of road; only the
+    arrived, by tier and driver: a labelled bar at the median, each run a marker, drivers
+    told apart by colour, hatch and marker; a driver with no arrival in a tier is named
+    there). Density: stopped vehicles per 100 m of road; only the
     generated fields have one. Returns the files written.
     """
     out = Path(out_dir)
@@ -600,34 +947,67 @@ def plot_bench(
     _save(ax, p)
     written.append(str(p))
 
-    # travel time by tier and driver: box plots of the runs that arrived
-    ax = Figure(figsize=(max(6.0, 1.3 * len(tiers) * max(len(drivers), 1)), 4.5),
-                layout="constrained").add_subplot()
-    width = 0.8 / max(len(drivers), 1)
-    for k, d in enumerate(drivers):
-        c, _, name = style(d)
-        data, pos = [], []
-        for i, t in enumerate(tiers):
-            v = [float(r["travel_time"]) for r in rows if r["driver"] == d and r["tier"] == t
-                 and r.get("arrived") and r.get("travel_time") is not None]
-            if v:
-                data.append(v)
-                pos.append(i + (k - (len(drivers) - 1) / 2.0) * width)
-        if data:
-            bp = ax.boxplot(data, positions=pos, widths=width * 0.85, patch_artist=True,
-                            manage_ticks=False)
-            for patch in bp["boxes"]:
-                patch.set(facecolor=c, alpha=0.55, edgecolor=c)
-            for med_line in bp["medians"]:
-                med_line.set(color="k")
-        ax.plot([], [], color=c, lw=6, alpha=0.55, label=name)
-    ax.set_xticks(range(len(tiers)), tiers)
-    ax.set_xlabel("difficulty tier")
-    ax.set_ylabel("travel time of runs that arrived [s]")
-    ax.set_title("Travel time by tier")
-    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
-    ax.legend(loc="best", fontsize="small")
+    ax = _bench_travel_time(rows, drivers, tiers)
     p = out / f"bench_travel_time.{fmt}"
     _save(ax, p)
     written.append(str(p))
     return written
+
+
+def _bench_travel_time(rows: Sequence[Mapping[str, Any]], drivers: list[str],
+                       tiers: list[str]) -> Any:
+    """Travel time [s] by tier and driver: the axes of ``bench_travel_time``."""
+
+    def style(d: str) -> tuple[str, str, str]:
+        return BENCH_STYLE.get(d, ("0.3", "x", d))
+
+    # travel time by tier and driver: a bar at the median of the runs that arrived, each
+    # run a marker on it, the value written above; drivers told apart by colour, hatch
+    # and marker; a driver that never arrived in a tier says so where its bar would be
+    ax = Figure(figsize=(max(6.5, 0.9 * len(tiers) * max(len(drivers), 1) + 2.5), 4.8),
+                layout="constrained").add_subplot()
+    width = 0.8 / max(len(drivers), 1)
+    hatches = ("", "//", "..", "xx", "\\\\", "++")
+    top = max([float(r["travel_time"]) for r in rows if r.get("arrived")
+               and r.get("travel_time") is not None] or [1.0])
+    proxies: list[tuple[Any, str]] = []
+    for k, d in enumerate(drivers):
+        c, m, name = style(d)
+        hatch = hatches[k % len(hatches)]
+        for i, t in enumerate(tiers):
+            sel = [r for r in rows if r["driver"] == d and r["tier"] == t]
+            if not sel:
+                continue
+            xb = i + (k - (len(drivers) - 1) / 2.0) * width
+            tv = [float(r["travel_time"]) for r in sel
+                  if r.get("arrived") and r.get("travel_time") is not None]
+            if not tv:
+                ax.text(xb, 0.02 * top, f"{name}: none of {len(sel)} arrived", rotation=90,
+                        ha="center", va="bottom", fontsize="x-small", color=c,
+                        gid=f"travel_none_{d}")
+                continue
+            med = float(np.median(tv))
+            ax.bar([xb], [med], width=width * 0.9, color=c, alpha=0.35, edgecolor=c,
+                   hatch=hatch, lw=1.2, gid=f"travel_{d}")
+            jit = np.linspace(-0.25, 0.25, len(tv)) * width if len(tv) > 1 else np.zeros(1)
+            ax.plot(xb + jit, tv, ls="none", marker=m, ms=6, color=c, mec="k", mew=0.6,
+                    zorder=4, gid=f"travel_runs_{d}")
+            note = f"{med:.1f} s" + (f"\n(median of {len(tv)})" if len(tv) > 1 else "")
+            if len(tv) < len(sel):
+                note += f"\n{len(sel) - len(tv)} of {len(sel)} not arrived"
+            ax.annotate(note, (xb, max(tv)), xytext=(0, 4), textcoords="offset points",
+                        ha="center", va="bottom", fontsize="x-small")
+        proxies += [(Patch(facecolor=c, alpha=0.35, edgecolor=c, hatch=hatch, lw=1.2),
+                     f"{name}: median"),
+                    (Line2D([], [], ls="none", marker=m, ms=6, color=c, mec="k", mew=0.6),
+                     f"{name}: each run")]
+    ax.set_xticks(range(len(tiers)), tiers)
+    ax.set_xlim(-0.5, len(tiers) - 0.5)
+    ax.set_ylim(0.0, 1.25 * top)
+    ax.set_xlabel("difficulty tier")
+    ax.set_ylabel("travel time of runs that arrived [s]")
+    ax.set_title("Travel time by tier")
+    ax.grid(True, axis="y", lw=0.3, alpha=0.5)
+    ax.figure.legend([h for h, _ in proxies], [lab for _, lab in proxies],
+                     loc="outside right upper", fontsize="small")
+    return ax

@@ -1767,4 +1767,5 @@ def _plot(run: _Run, result: SimResult) -> None:
         splot.plot_trajectory(traj, window, obstacles, roadmaps,
                               path=folder / f"plan_{i:03d}_t{t:07.1f}.png",
                               footprint_every=10.0, vehicle_size=(ego.length, ego.width),
+                              s_max=run.sc.trajectory.s_max,
                               title=f"{run.sc.name}: plan {i} at t = {t:.1f} s")
