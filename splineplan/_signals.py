@@ -25,3 +25,48 @@ def sigint_ignored() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, old)
+
+
+class _Deferred:
+    """Whether a Ctrl-C came while :func:`sigint_deferred` held it back."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    def check(self) -> None:
+        """Raise :class:`KeyboardInterrupt` if a Ctrl-C came (a safe point to stop at)."""
+        if self.requested:
+            raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def sigint_deferred() -> Iterator[_Deferred]:
+    """Hold a Ctrl-C back until the block calls ``check()`` at a safe point; a second one
+    raises at once.
+
+    A simulation stops between two whole steps, so that its record ends on a step the
+    loop has seen through. Only the main thread can change signal handlers; elsewhere, or
+    where SIGINT is ignored (a process started in a shell's background), the block runs
+    with the handling it had and ``check()`` does nothing.
+    """
+    state = _Deferred()
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is signal.SIG_IGN):
+        yield state
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        if state.requested:  # the second Ctrl-C: stop now
+            raise KeyboardInterrupt
+        state.requested = True
+
+    try:
+        old = signal.signal(signal.SIGINT, handler)
+    except (ValueError, OSError):
+        yield state
+        return
+    try:
+        yield state
+    finally:
+        signal.signal(signal.SIGINT, old)
+

@@ -566,6 +566,10 @@ def execute_task(task: Mapping[str, Any], *, timeout: float = 1800.0,
 
 
 def _worker_main(argv: Sequence[str]) -> int:
+    # the suite stops its runs with SIGINT, also where it was itself started ignoring
+    # Ctrl-C (in the background of a shell, under nohup): the run takes it whatever the
+    # inherited disposition
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     task = json.loads(Path(argv[0]).read_text())
     try:
         row = run_one(task)

@@ -56,7 +56,7 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 
-from splineplan._signals import sigint_ignored
+from splineplan._signals import sigint_deferred, sigint_ignored
 from splineplan.corridor import Corridor
 from splineplan.errors import (
     GeometryError,
@@ -602,36 +602,38 @@ class _Run:
         steps = round(sc.sim.duration / self.dt)
         planner = self.driver == "planner"
         try:
-            for k in range(steps):
-                if self.in_sim and planner:
-                    self._drive()
-                self._step()
-                if self.on_step is not None:
-                    self.on_step(self.time)
-                if bar is not None and k % 10 == 0:
-                    bar.update(10 * self.dt)
-                if not self.in_sim:
-                    if (self.depart_time is not None
-                            or self.ego not in self.sumo.simulation.getDepartedIDList()):
-                        continue
-                    self._enter()
-                elif not planner and self.ego in self.sumo.simulation.getArrivedIDList():
-                    self.status = "arrived"
-                    self.reason = (f"SUMO's driver reached the end of its route at "
-                                   f"t={self.time:.1f} s")
-                    self.in_sim = False
-                    break
-                self._observe()
-                if self.status != "running":
-                    break
-                if planner:
-                    if not self.replans:
-                        self._replan("start", "")
-                    else:
-                        self._maybe_replan()
-            else:
-                self.status = "timeout"
-                self.reason = self._timeout_reason()
+            with sigint_deferred() as ctrl_c:  # Ctrl-C stops between steps
+                for k in range(steps):
+                    ctrl_c.check()
+                    if self.in_sim and planner:
+                        self._drive()
+                    self._step()
+                    if self.on_step is not None:
+                        self.on_step(self.time)
+                    if bar is not None and k % 10 == 0:
+                        bar.update(10 * self.dt)
+                    if not self.in_sim:
+                        if (self.depart_time is not None
+                                or self.ego not in self.sumo.simulation.getDepartedIDList()):
+                            continue
+                        self._enter()
+                    elif not planner and self.ego in self.sumo.simulation.getArrivedIDList():
+                        self.status = "arrived"
+                        self.reason = (f"SUMO's driver reached the end of its route at "
+                                       f"t={self.time:.1f} s")
+                        self.in_sim = False
+                        break
+                    self._observe()
+                    if self.status != "running":
+                        break
+                    if planner:
+                        if not self.replans:
+                            self._replan("start", "")
+                        else:
+                            self._maybe_replan()
+                else:
+                    self.status = "timeout"
+                    self.reason = self._timeout_reason()
         finally:
             if bar is not None:
                 bar.close()

@@ -26,8 +26,15 @@ START_TIMEOUT = 60.0
 
 
 def _cli(*args: str) -> subprocess.Popen[str]:
+    # Ctrl-C as in a terminal: where the tests themselves run with SIGINT ignored (started
+    # in a shell's background, as CI may), the command would inherit that
     return subprocess.Popen([sys.executable, "-m", "splineplan.cli", *args], cwd=ROOT,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_sigint)
+
+
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _wait_for(proc: subprocess.Popen[str], ready: Callable[[], bool]) -> None:
