@@ -128,6 +128,12 @@ _SWEEP_CLIP_TIME = 1.0
 _CONFLICT_TIMES: tuple[float, ...] = tuple(0.5 * k for k in range(7))
 #: Longitudinal slack [m] of that check.
 _CONFLICT_SLACK = 1.0
+#: Time [s] the ego keeps between its passage of a junction's conflict area and that of a
+#: vehicle it must yield to; it stops this far [m] before the area to let that one pass.
+YIELD_GAP = 1.5
+YIELD_STOP = 1.0
+#: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
+STOPPED_FOE_SPEED = 0.1
 #: At most one ``traffic`` replan per this many seconds.
 _TRAFFIC_REPLAN_EVERY = 0.5
 #: Period [s] of the checks for new obstacles ahead and for traffic beside the ego coming
@@ -1459,7 +1465,7 @@ class _Run:
                 rel = math.cos(float(o.head[j]) - full_h[first])
                 v_l = max(float(o.speed[j]) * rel, 0.0)
                 cap = min(cap, safe_speed(gap, v_l, tp.b_max, sim.time_gap))
-        cap = min(cap, self._red_light_speed())
+        cap = min(cap, self._red_light_speed(), self._yield_speed())
         return cap, int(math.isfinite(cap))
 
     def _red_light_speed(self) -> float:
@@ -1478,6 +1484,66 @@ class _Run:
                 return math.sqrt(max(2.0 * tp.b_max * (dist - 1.0), 0.0))
             break
         return math.inf
+
+    def _yield_speed(self) -> float:
+        """Speed cap [m/s] that gives way at junctions, as SUMO's right of way says.
+
+        For each vehicle that the ego must yield to on its way through the next junctions
+        (``getJunctionFoes``: ``egoResponse``) and that has not cleared the conflict area,
+        the times it occupies that area (at its speed) and the times the ego would (along
+        its plan, accelerating from its speed) are compared; where they come within
+        :data:`YIELD_GAP` of each other, the ego stops :data:`YIELD_STOP` before the area,
+        if it still can at its braking limit. Once it cannot, it goes on: a car that stops
+        inside a crossing blocks it. A foe standing still outside the area is waiting
+        (for a light or another vehicle) and is no conflict.
+        """
+        tp, ego = self.sc.trajectory, self.sc.ego
+        try:
+            foes = self.sumo.vehicle.getJunctionFoes(self.ego, self.sc.sim.lookahead)
+        except Exception:  # an older SUMO, or the ego not on its route: SUMO's view only
+            return math.inf
+        cap = math.inf
+        for foe in foes:
+            fid, ego_in, foe_in, ego_out, foe_out, must_yield = (
+                foe[0], foe[1], foe[2], foe[3], foe[4], foe[7])
+            if not must_yield or ego_in <= YIELD_STOP:
+                continue  # the ego has the way, or is at (or in) the area already
+            try:
+                v_f = self.sumo.vehicle.getSpeed(fid)
+                foe_out += self.sumo.vehicle.getLength(fid)
+            except Exception:
+                continue
+            if foe_out <= 0.0 or (foe_in > 0.0 and v_f < STOPPED_FOE_SPEED):
+                continue  # cleared, or waiting outside the area
+            t_foe_in = max(foe_in, 0.0) / max(v_f, 1e-3)
+            t_foe_out = foe_out / max(v_f, 1e-3)
+            t_in = self._time_along_plan(ego_in)
+            t_out = self._time_along_plan(ego_out + ego.length)
+            if t_in - YIELD_GAP >= t_foe_out or t_foe_in >= t_out + YIELD_GAP:
+                continue
+            room = ego_in - YIELD_STOP
+            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * room:
+                continue  # cannot stop before the area, even braking hard: clear it
+            # a comfortable stop, one step early
+            cap = min(cap, math.sqrt(max(2.0 * tp.b_max * (room - self.v * self.dt), 0.0)))
+        return cap
+
+    def _time_along_plan(self, dist: float) -> float:
+        """Time [s] the ego takes to drive ``dist`` [m] along its plan from where it is,
+        at the plan's speeds but no faster than accelerating from its speed at ``a_max``."""
+        ps, _, _, _, pv2 = self._pl
+        a2 = 2.0 * self.sc.trajectory.a_max
+        u0, end = self.u, min(self.u + dist, ps[-1])
+        t, u, v = 0.0, u0, self.v
+        i = bisect.bisect_right(ps, u0)
+        while u < end - 1e-9:
+            nxt = min(ps[i], end) if i < len(ps) else end
+            v_next = max(min(math.sqrt(max(_interp(nxt, ps, pv2), 0.0)),
+                             math.sqrt(self.v * self.v + a2 * (nxt - u0))), 0.5)
+            t += 2.0 * (nxt - u) / (max(v, 0.5) + v_next)
+            u, v, i = nxt, v_next, i + 1
+        # beyond the plan's end: at the last speed
+        return t + max(dist - (end - u0), 0.0) / max(v, 0.5)
 
     # -- end ----------------------------------------------------------------------------------
     def fail(self, err: BaseException) -> None:
