@@ -35,7 +35,7 @@ from splineplan.errors import SplineplanError, TrajectoryError
 from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
-from splineplan.speed import allowed_speed, speed_profile
+from splineplan.speed import speed_profile
 from splineplan.trajectory import (
     IterationStats,
     Trajectory,
@@ -45,6 +45,7 @@ from splineplan.trajectory import (
     check_start_speed,
     plan_trajectory,
     sample_violations,
+    speed_limit,
 )
 
 log = logging.getLogger(__name__)
@@ -336,7 +337,7 @@ def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,
                             "clearance_road")}
     xy = np.column_stack((cat["x"], cat["y"]))
     s: FloatArray = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))))
-    limit = allowed_speed(cat["curvature"], mu=tp.mu, g=tp.g, s_max=tp.s_max)
+    limit = speed_limit(s, cat["curvature"], tp)
     speed = speed_profile(s, limit, a_max=tp.a_max, b_max=tp.b_max,
                           start_speed=start_speed, end_speed=end_speed)
     stats = IterationStats(*(sum(getattr(p.iterations, f) for p in parts)

@@ -456,7 +456,8 @@ def plot_speed_profile(
     path: str | PathLike[str] | None = None,
     title: str | None = "Speed profile along the trajectory",
 ) -> Any:
-    """Speed along the curve with its limits: cornering (equation 1) and ``s_max``.
+    """Speed along the curve with its limits: cornering (equation 1), the steering rate
+    and ``s_max``.
 
     Parameters
     ----------
@@ -464,7 +465,7 @@ def plot_speed_profile(
         Anything with ``s``, ``speed`` and ``curvature`` arrays ``(n,)``.
     params
         :class:`~splineplan.trajectory.TrajectoryParams` or a mapping with ``mu``, ``g``
-        and ``s_max``.
+        and ``s_max`` (and ``wheelbase`` and ``max_steering_rate``, if the plan had them).
     ax
         Axes to draw into; a new figure when ``None``.
     path
@@ -473,8 +474,11 @@ def plot_speed_profile(
     Returns
     -------
     The axes; lines with gids ``speed``, ``cornering_limit`` (``sqrt(mu g / |kappa|)``,
-    NaN where it exceeds 1.5 ``s_max``) and ``s_max``.
+    NaN where it exceeds 1.5 ``s_max``), ``steering_limit`` (likewise; where the params
+    have the car's steering) and ``s_max``.
     """
+    from splineplan.speed import steering_speed_limit
+
     mu, g, s_max = (_param(params, k) for k in ("mu", "g", "s_max"))
     s = np.asarray(trajectory.s, dtype=float)
     v = np.asarray(trajectory.speed, dtype=float)
@@ -483,12 +487,25 @@ def plot_speed_profile(
         corner = np.sqrt(mu * g / kappa)
     top = 1.5 * s_max
     corner = np.where(corner <= top, corner, np.nan)
+    steer = np.full(len(s), np.nan)
+    try:
+        wheelbase, rate = (_param(params, k) for k in ("wheelbase", "max_steering_rate"))
+    except (KeyError, AttributeError):  # a plan saved before the car's steering was kept
+        pass
+    else:
+        steer = steering_speed_limit(s, np.asarray(trajectory.curvature, dtype=float),
+                                     wheelbase=wheelbase, max_steering_rate=rate)
+        steer = np.where(steer <= top, steer, np.nan)
+    allowed = np.fmin(np.fmin(corner, steer), s_max)
     if ax is None:
         ax = Figure(figsize=(8.0, 3.5), layout="constrained").add_subplot()
-    ax.fill_between(s, 0.0, np.minimum(np.nan_to_num(corner, nan=top), s_max), color="#e3f2fd",
-                    zorder=1, label="allowed (cornering and s_max)")
+    ax.fill_between(s, 0.0, np.nan_to_num(allowed, nan=s_max), color="#e3f2fd",
+                    zorder=1, label="allowed (cornering, steering rate and s_max)")
     ax.plot(s, corner, color="#ef6c00", lw=1.2, zorder=3, gid="cornering_limit",
             label=r"cornering limit $\sqrt{\mu g / |\kappa|}$")
+    if np.isfinite(steer).any():
+        ax.plot(s, steer, color="#6a1b9a", lw=1.0, ls=":", zorder=3, gid="steering_limit",
+                label="steering-rate limit")
     ax.axhline(s_max, color="#c62828", ls="--", lw=1.2, zorder=3, gid="s_max",
                label=f"$s_{{max}}$ = {s_max:.2f} m/s")
     ax.plot(s, v, color="#1565c0", lw=2.0, zorder=4, gid="speed", label="planned speed")

@@ -1,8 +1,11 @@
-"""Speed profile along a curve: cornering, speed-limit, acceleration and braking limits.
+"""Speed profile along a curve: cornering, steering-rate, speed-limit, acceleration and
+braking limits.
 
-Beyond the paper (which only states the cornering speed, equation 1): a forward pass bounds
-the speed by the acceleration limit, ``v_j^2 <= v_{j-1}^2 + 2 a_max ds``, and a backward pass
-by the braking limit, ``v_j^2 <= v_{j+1}^2 + 2 b_max ds``. Time follows from the speeds.
+Beyond the paper (which only states the cornering speed, equation 1): where the curvature
+changes, the front wheels must turn, and a car turns them at a limited rate, so the speed
+is bounded there too (:func:`steering_speed_limit`); a forward pass bounds the speed by the
+acceleration limit, ``v_j^2 <= v_{j-1}^2 + 2 a_max ds``, and a backward pass by the braking
+limit, ``v_j^2 <= v_{j+1}^2 + 2 b_max ds``. Time follows from the speeds.
 """
 
 from __future__ import annotations
@@ -24,6 +27,38 @@ def allowed_speed(kappa: ArrayLike, *, mu: float, g: float, s_max: float) -> Flo
     with np.errstate(divide="ignore", over="ignore"):  # straight: zero or denormal kappa
         v = np.sqrt(mu * g / k)
     return np.asarray(np.minimum(v, s_max))
+
+
+def steering_angle(kappa: ArrayLike, wheelbase: float) -> FloatArray:
+    """Front-wheel angle [rad] of a kinematic single-track car whose centre, half the
+    ``wheelbase`` [m] ahead of the rear axle, runs on curvature ``kappa`` [1/m]: the rear
+    axle then turns on radius ``sqrt(R^2 - (wheelbase / 2)^2)`` for the centre's radius R,
+    and ``tan(angle) = wheelbase / that``."""
+    k = np.asarray(kappa, dtype=float)
+    half = wheelbase / 2.0
+    return np.asarray(np.arctan(wheelbase * k / np.sqrt(np.clip(1.0 - (half * k) ** 2,
+                                                                1e-12, None))))
+
+
+def steering_speed_limit(s: ArrayLike, kappa: ArrayLike, *, wheelbase: float,
+                         max_steering_rate: float) -> FloatArray:
+    """Speed limit ``(n,)`` [m/s] at stations ``s`` ``(n,)`` [m] that lets the front wheels
+    follow the curvature ``kappa`` ``(n,)`` [1/m] at most ``max_steering_rate`` [rad/s].
+
+    A step of ``ds`` over which the wheel angle changes by ``d`` takes ``2 ds / (v_0 + v_1)``
+    (see :func:`times_from_profile`), so its mean speed may be at most
+    ``max_steering_rate * ds / |d|``; both its ends get that limit (``inf`` where the
+    curvature does not change).
+    """
+    st = np.asarray(s, dtype=float)
+    turn = np.abs(np.diff(steering_angle(kappa, wheelbase)))
+    with np.errstate(divide="ignore"):
+        step = np.where(turn > 0, max_steering_rate * np.diff(st) / turn, np.inf)
+    out = np.full(len(st), np.inf)
+    if len(step):
+        out[:-1] = step
+        out[1:] = np.minimum(out[1:], step)
+    return out
 
 
 def speed_profile(

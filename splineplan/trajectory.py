@@ -92,7 +92,12 @@ from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.obstacles import Obstacles
 from splineplan.optimiser import _Curve, _Optimiser, _refine
 from splineplan.roadmap import Roadmap, RoadmapParams
-from splineplan.speed import allowed_speed, speed_profile, times_from_profile
+from splineplan.speed import (
+    allowed_speed,
+    speed_profile,
+    steering_speed_limit,
+    times_from_profile,
+)
 from splineplan.trajectory_params import TrajectoryParams
 
 __all__ = [
@@ -435,7 +440,7 @@ def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
     pos, d1, d2 = spline(uu), spline(uu, 1), spline(uu, 2)
     kappa = curvature_from_derivatives(d1, d2)
     head = np.arctan2(d1[:, 1], d1[:, 0])
-    limit = allowed_speed(kappa, mu=params.mu, g=params.g, s_max=params.s_max)
+    limit = speed_limit(s, kappa, params)
     speed = speed_profile(s, limit, a_max=params.a_max, b_max=params.b_max,
                           start_speed=start_speed, end_speed=end_speed)
     clear_obs = checker.obstacles(pos, head)
@@ -460,6 +465,15 @@ def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
     return {"t": _times(s, speed), "x": pos[:, 0], "y": pos[:, 1], "heading": head,
             "speed": speed, "curvature": kappa, "s": s, "clear_obs": clear_obs,
             "clear_road": clear_road, "violations": _worst_of(violations + between)}
+
+
+def speed_limit(s: FloatArray, curvature: FloatArray, params: TrajectoryParams) -> FloatArray:
+    """Speed limit ``(n,)`` [m/s] along a curve sampled at arc lengths ``s`` [m]: the
+    cornering speed of equation (1), ``s_max``, and what the steering rate allows."""
+    return np.minimum(
+        allowed_speed(curvature, mu=params.mu, g=params.g, s_max=params.s_max),
+        steering_speed_limit(s, curvature, wheelbase=params.wheelbase,
+                             max_steering_rate=params.max_steering_rate))
 
 
 def sample_violations(s: FloatArray, xy: FloatArray, curvature: FloatArray,

@@ -42,6 +42,13 @@ class TrajectoryParams:
         Smallest turning radius [m] of the path of the vehicle's centre (the middle of its
         rectangle): a hard limit on the curvature. A compact car with a 10.9 m turning
         circle (kerb to kerb) and a 2.6 m wheelbase turns its centre on about 4.2 m.
+    wheelbase, max_steering_rate
+        The car as a kinematic single-track model: its wheelbase [m], with the centre
+        half of it ahead of the rear axle, and how fast it turns its front wheels [rad/s].
+        Where the curvature changes, the speed profile slows so that the wheels keep up
+        (:func:`splineplan.speed.steering_speed_limit`). Defaults: a compact car (BMW 320i,
+        CommonRoad's vehicle type 2: 2.578 m, 0.4 rad/s). The largest steering angle
+        follows from ``min_turn_radius`` (:attr:`max_steering_angle`).
     max_iterations
         Cap on the number of control-point moves tried.
     patience
@@ -81,6 +88,8 @@ class TrajectoryParams:
     sample_spacing: float = 0.5
     road_margin: float = 0.0
     min_turn_radius: float = 4.2
+    wheelbase: float = 2.578
+    max_steering_rate: float = 0.4
     max_iterations: int = 5000
     band_fraction: float = 0.8
     max_control_spacing: float = 25.0
@@ -96,8 +105,12 @@ class TrajectoryParams:
             raise ParameterError(f"TrajectoryParams.degree must be an integer in 2..5, "
                                  f"got {self.degree!r}")
         for name in ("mu", "g", "s_max", "a_max", "b_max", "sample_spacing", "min_turn_radius",
-                     "max_control_spacing"):
+                     "max_control_spacing", "wheelbase", "max_steering_rate"):
             require_positive(f"TrajectoryParams.{name}", getattr(self, name))
+        if self.wheelbase >= 2.0 * self.min_turn_radius:
+            raise ParameterError(f"TrajectoryParams.wheelbase ({self.wheelbase!r} m) must be "
+                                 f"less than twice min_turn_radius ({self.min_turn_radius!r} "
+                                 f"m): the car's centre could not turn that tightly")
         if not (isinstance(self.band_fraction, int | float | np.floating | np.integer)
                 and 0.0 <= self.band_fraction <= 1.0):
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
@@ -115,6 +128,13 @@ class TrajectoryParams:
     def kappa_max(self) -> float:
         """Hard curvature limit [1/m]: ``1 / min_turn_radius``."""
         return 1.0 / self.min_turn_radius
+
+    @property
+    def max_steering_angle(self) -> float:
+        """Front-wheel angle [rad] at the turning limit (kinematic single-track model)."""
+        from splineplan.speed import steering_angle
+
+        return float(steering_angle(self.kappa_max, self.wheelbase))
 
     @property
     def kappa_smax(self) -> float:

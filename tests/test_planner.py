@@ -7,6 +7,7 @@ import pytest
 import shapely
 from shapely import affinity
 from shapely.geometry import Polygon, box
+from test_trajectory import assert_wheels_keep_up
 
 from splineplan.corridor import Corridor
 from splineplan.obstacles import Obstacles
@@ -130,3 +131,4 @@ def test_one_km_obstacle_field_is_feasible_and_continuous_at_the_joins(seed: int
     dv2 = np.diff(tr.speed**2) / (2 * np.maximum(np.diff(tr.s), 1e-9))
     assert dv2.max() <= 2.0 + 1e-6 and dv2.min() >= -4.0 - 1e-6
     assert tr.s[-1] > 990.0 and tr.speed[-1] == 0.0
+    assert_wheels_keep_up(tr)  # the joins included

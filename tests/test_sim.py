@@ -295,12 +295,12 @@ def test_city_scenario_drives_the_level1_route(runs: dict[str, SimResult]) -> No
 
 
 def test_car_alongside_is_planned_around(tmp_path: Path) -> None:
-    """The first 80 s of the city among busy traffic: on two-lane roads cars come up
+    """The first 100 s of the city among busy traffic: on two-lane roads cars come up
     alongside on the other lane. The ego's widest path would drift to the middle of the
     road (into them); each such car becomes a swept obstacle and the ego keeps its side.
     Checked on SUMO's own record, with shapely."""
     sc = load_scenario(SCENARIOS / "city_traffic.toml")
-    short = dataclasses.replace(sc, sim=dataclasses.replace(sc.sim, duration=80.0))
+    short = dataclasses.replace(sc, sim=dataclasses.replace(sc.sim, duration=100.0))
     r = simulate(short, out_dir=tmp_path, progress=False)
     m = r.metrics
     assert r.status == "timeout" and m["collisions"] == 0, m["collision_events"][:3]

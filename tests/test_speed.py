@@ -57,3 +57,37 @@ def test_stop_and_errors() -> None:
         speed_profile(s, np.ones(201), a_max=0.0, b_max=4.0)
     with pytest.raises(ParameterError):
         times_from_profile([0.0, 1.0], [0.0, 0.0])
+
+
+def _wheel_angle(kappa: np.ndarray, wheelbase: float) -> np.ndarray:
+    """The front-wheel angle of a kinematic single-track car whose centre, half the
+    wheelbase ahead of the rear axle, runs on curvature ``kappa``, written here from the
+    geometry: the rear axle turns about the same centre on radius sqrt(R^2 - (L/2)^2)."""
+    radius = 1.0 / np.maximum(np.abs(kappa), 1e-12)
+    rear = np.sqrt(np.maximum(radius**2 - (wheelbase / 2) ** 2, 1e-12))
+    return np.sign(kappa) * np.arctan(wheelbase / rear)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), rate=st.floats(0.1, 1.0), v0=st.floats(0.0, 10.0))
+def test_the_wheels_keep_up_with_the_curvature(seed: int, rate: float, v0: float) -> None:
+    """Random curvature profiles within the turning limit: driven at the profile's speeds,
+    the front wheels turn no faster than the steering rate, and where the curvature does
+    not change the speed is the cornering one."""
+    from splineplan.speed import steering_speed_limit
+
+    rng = np.random.default_rng(seed)
+    s = np.concatenate(([0.0], np.cumsum(rng.uniform(0.2, 1.0, 300))))
+    kappa = np.clip(np.cumsum(rng.normal(0.0, 0.02, len(s))), -0.238, 0.238)
+    kappa[100:140] = kappa[100]  # a stretch of constant curvature
+    limit = np.minimum(allowed_speed(kappa, mu=0.7, g=9.81, s_max=13.89),
+                       steering_speed_limit(s, kappa, wheelbase=2.578,
+                                            max_steering_rate=rate))
+    v = speed_profile(s, limit, a_max=2.0, b_max=4.0, start_speed=v0)
+    moving = v[:-1] + v[1:] > 0
+    dt = 2 * np.diff(s)[moving] / (v[:-1] + v[1:])[moving]
+    turn = np.abs(np.diff(_wheel_angle(kappa, 2.578)))[moving]
+    assert np.all(turn / dt <= rate * (1 + 1e-9))
+    inner = slice(102, 138)
+    corner = allowed_speed(kappa[inner], mu=0.7, g=9.81, s_max=13.89)
+    assert np.all(limit[inner] == corner)

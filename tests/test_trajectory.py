@@ -230,6 +230,20 @@ def test_infeasible_start_is_reported_not_hidden() -> None:
     assert_violations_say_why(tr, road, obstacles)
 
 
+def assert_wheels_keep_up(tr: Trajectory, params: TrajectoryParams = TP) -> None:
+    """Driven at its speeds, the trajectory turns the front wheels of the kinematic
+    single-track car (centre half the wheelbase ahead of the rear axle) no faster than
+    the steering rate: the wheel angle from the rear axle's radius, written here."""
+    L = params.wheelbase
+    radius = 1.0 / np.maximum(np.abs(tr.curvature), 1e-12)
+    angle = np.sign(tr.curvature) * np.arctan(
+        L / np.sqrt(np.maximum(radius**2 - (L / 2) ** 2, 1e-12)))
+    dt = np.diff(tr.t)
+    ok = np.isfinite(dt) & (dt > 0)
+    rate = np.abs(np.diff(angle))[ok] / dt[ok]
+    assert rate.max(initial=0.0) <= params.max_steering_rate * (1 + 1e-6)
+
+
 def assert_violations_say_why(tr: Trajectory, corridor: Corridor, obstacles: Obstacles,
                               rp: RoadmapParams | None = None) -> None:
     """``violations`` is empty exactly when the trajectory is feasible, and each one is
@@ -350,6 +364,7 @@ def test_lane_corners_feasible_only_when_clear(angle: float, left: bool, width: 
     if tr.feasible:
         assert lane_clearance(tr, corridor, lane, rp) >= road_margin - 0.05
     assert_violations_say_why(tr, corridor, Obstacles.empty(), rp)
+    assert_wheels_keep_up(tr)
 
 
 @settings(max_examples=30, deadline=None)
@@ -468,8 +483,12 @@ def test_off_road_start() -> None:
     {"sample_spacing": 0.0}, {"min_turn_radius": float("inf")}, {"degree": 1},
     {"degree": 2.5}, {"max_iterations": -1}, {"g": 0.0}, {"patience": -1}, {"patience": 1.5},
     {"mu": True}, {"s_max": "13"}, {"lead_in_time": -0.1}, {"detour_rate": float("nan")},
+    {"wheelbase": 0.0}, {"wheelbase": 9.0}, {"max_steering_rate": 0.0},
+    {"max_steering_rate": float("inf")},
 ])
 def test_bad_params(kwargs: dict[str, float]) -> None:
+    """Each bad value is refused on creation (a wheelbase of twice the turning radius or
+    more cannot turn the car's centre that tightly)."""
     with pytest.raises(ParameterError):
         TrajectoryParams(**kwargs)  # type: ignore[arg-type]
 
@@ -638,6 +657,7 @@ def _random_fields(seed: int, n: int, curved: bool) -> bool | None:
     if tr.feasible:
         assert shapely_check_corridor(tr, cor, obs, rm.params) == (0, 0)
     assert_violations_say_why(tr, cor, obs, rm.params)
+    assert_wheels_keep_up(tr)
     assert tr.min_speed_after >= tr.min_speed_before - 1e-9
     return tr.feasible
 
