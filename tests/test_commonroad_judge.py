@@ -1,0 +1,138 @@
+"""CommonRoad's drivability checker as an independent judge of level 3's trajectories.
+
+``trajectory_feasibility`` with the kinematic single-track model of the BMW 320i (CommonRoad's
+vehicle type 2, steering rate at most 0.4 rad/s) reconstructs, between every two states
+0.1 s apart, an input (steering rate, acceleration) within the car's limits that reaches
+the next state. The planner's centre (half the wheelbase ahead of the rear axle, on the
+path's tangent turned by the slip angle) is converted to CommonRoad's state: the rear axle
+plus ``b`` along the body, the body's heading, the rear axle's speed and the wheel angle.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_trajectory import kinked_lane, random_field, real_plan
+
+from splineplan.obstacles import Obstacles
+from splineplan.roadmap import RoadmapParams, plan_roadmap
+from splineplan.trajectory import Trajectory, TrajectoryParams, plan_trajectory
+
+feasibility = pytest.importorskip("commonroad_dc.feasibility.feasibility_checker",
+                                  reason="commonroad-drivability-checker is a test extra")
+DT = 0.1
+
+
+def commonroad_states(tr: Trajectory, params: TrajectoryParams) -> list:
+    """The trajectory every :data:`DT` seconds as CommonRoad's KS states.
+
+    The car's body follows from its centre's path as a kinematic single-track car's does:
+    the rear axle, half the wheelbase behind the centre, is towed without slipping
+    sideways (``theta' = v_c . n(theta) / (L / 2)``, integrated every millisecond); its speed
+    is the centre's along the body, and the wheel angle gives the body's turn rate,
+    ``tan(delta) = L theta' / v_rear``.
+    """
+    from commonroad.scenario.state import KSState
+    from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
+
+    b = VehicleDynamics.KS(VehicleType.BMW_320i).parameters.b
+    L = params.wheelbase
+    t = np.arange(0.0, tr.t[-1], DT / 100)
+    x, y, head, v = _centre_at(tr, t)
+    vx, vy = v * np.cos(head), v * np.sin(head)
+    theta = np.empty(len(t))
+    theta[0] = head[0]  # the start is straight
+    for i in range(len(theta) - 1):
+        turn = (-vx[i] * math.sin(theta[i]) + vy[i] * math.cos(theta[i])) / (L / 2)
+        theta[i + 1] = theta[i] + (t[i + 1] - t[i]) * turn
+    rate = np.gradient(theta, t)
+    v_rear = vx * np.cos(theta) + vy * np.sin(theta)
+    wheel = np.arctan2(L * rate, np.maximum(v_rear, 1e-3))
+    rear = np.column_stack((x - L / 2 * np.cos(theta), y - L / 2 * np.sin(theta)))
+    cog = rear + b * np.column_stack((np.cos(theta), np.sin(theta)))
+    keep = np.arange(0, len(t), 100)
+    return [KSState(position=cog[i], orientation=float(theta[i]), velocity=float(v_rear[i]),
+                    steering_angle=float(wheel[i]), time_step=k) for k, i in enumerate(keep)]
+
+
+def _centre_at(tr: Trajectory, t: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The centre's x, y [m], path heading [rad] and speed [m/s] at times ``t`` [s]: the
+    speed changes at constant acceleration between samples (as the profile was made), so
+    that positions and speeds agree at any speed, and the pose follows the arc length."""
+    i = np.clip(np.searchsorted(tr.t, t, side="right") - 1, 0, len(tr.t) - 2)
+    ds = tr.s[i + 1] - tr.s[i]
+    acc = (tr.speed[i + 1] ** 2 - tr.speed[i] ** 2) / (2 * ds)
+    tau = t - tr.t[i]
+    s = np.minimum(tr.s[i] + tr.speed[i] * tau + acc * tau**2 / 2, tr.s[i + 1])
+    v = np.maximum(tr.speed[i] + acc * tau, 0.0)
+    head = np.interp(s, tr.s, np.unwrap(tr.heading))
+    return np.interp(s, tr.s, tr.x), np.interp(s, tr.s, tr.y), head, v
+
+
+def judge(tr: Trajectory, params: TrajectoryParams | None = None) -> bool:
+    from commonroad.scenario.trajectory import Trajectory as CRTrajectory
+    from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
+
+    params = params or TrajectoryParams()
+    states = commonroad_states(tr, params)
+    ok, _ = feasibility.trajectory_feasibility(
+        CRTrajectory(0, states), VehicleDynamics.KS(VehicleType.BMW_320i), DT,
+        objective=_reach_steering, criteria=_with_steering)
+    return bool(ok)
+
+
+def _reach_steering(u: np.ndarray, x0: np.ndarray, x1: np.ndarray, dt: float,
+                    vehicle_dynamics: object, ftol: float, e: np.ndarray) -> float:
+    """CommonRoad's objective (position, speed and orientation) with the wheel angle's
+    miss added: the input sought reaches the next state's wheel angle too."""
+    cost = feasibility.position_orientation_objective(u, x0, x1, dt, vehicle_dynamics,
+                                                      ftol, e)
+    sim = vehicle_dynamics.forward_simulation(x0, u, dt, throw=False)  # type: ignore[attr-defined]
+    return float(cost if sim is None else math.hypot(cost, x1[2] - sim[2]))
+
+
+def _with_steering(x: np.ndarray, x_sim: np.ndarray, vehicle_dynamics: object,
+                   e: np.ndarray, d: int) -> bool:
+    """CommonRoad's criteria (position and orientation reached), and the wheel angle too:
+    its own compare only the pose, so that each step could start from any wheel angle and
+    the steering rate would go unchecked."""
+    return bool(feasibility.position_orientation_feasibility_criteria(
+        x, x_sim, vehicle_dynamics, e, d) and abs(x[2] - x_sim[2]) < STEERING_TOLERANCE)
+
+
+#: How far [rad] the reached wheel angle may be off the next state's (the reconstruction
+#: differentiates the body's heading).
+STEERING_TOLERANCE = 0.01
+
+
+@pytest.mark.parametrize("angle", [45.0, -60.0])
+def test_lane_corners_are_drivable_by_commonroads_car(angle: float) -> None:
+    """A bend of one 3.5 m lane, planned with the defaults (the BMW's steering rate)."""
+    corridor, _ = kinked_lane(angle, 3.5)
+    rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), RoadmapParams())
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(), None, 0.0, start_speed=8.0)
+    assert tr.feasible
+    assert judge(tr)
+
+
+@pytest.mark.parametrize("seed", [1, 4])
+def test_obstacle_fields_are_drivable_by_commonroads_car(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    cor, obs, start = random_field(rng, bool(seed % 2), 5, gap=3.0)
+    _, tr = real_plan(cor, obs, start, float(cor.heading_at(1.0)))
+    assert tr.feasible
+    assert judge(tr)
+
+
+def test_the_judge_refuses_what_the_steering_rate_forbids() -> None:
+    """The same bend planned for a car that could turn its wheels at once: the curve is
+    the same, its speed through the bend's ends higher, and CommonRoad's car cannot
+    follow (the judge sees the steering rate)."""
+    corridor, _ = kinked_lane(45.0, 3.5)
+    rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), RoadmapParams())
+    instant = TrajectoryParams(max_steering_rate=100.0)
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(), instant, 0.0, start_speed=8.0)
+    assert tr.feasible
+    assert not judge(tr)
