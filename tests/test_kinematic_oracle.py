@@ -14,8 +14,8 @@ from shapely import affinity
 from shapely.geometry import Polygon, box
 from test_trajectory import random_field, real_plan
 
+from benchmarks.bench_oracle import extended_road
 from benchmarks.kinematic_oracle import Car, Search, best_clearance, drive, error
-from splineplan.corridor import Corridor
 from splineplan.errors import RoadBlockedError
 
 CAR = Car()
@@ -99,18 +99,6 @@ def test_best_clearance_beside_a_wall() -> None:
     best = best_clearance(road, [wall], (4.0, -3.9 + 0.05, 0.0), goal, upper=4.0,
                           search=COARSE)
     assert 3.5 - error(COARSE) - 0.1 <= best <= 3.5 + error(COARSE)
-
-
-def extended_road(cor: Corridor, extra: float = 8.0) -> Polygon:
-    """The corridor's area, extended straight past both ends by ``extra`` [m] (as the
-    planner extends it: a car starting at the corridor's start overhangs it)."""
-    left, right = cor.left_xy(), cor.right_xy()
-    h0, h1 = float(cor.heading_at(0.0)), float(cor.heading_at(cor.length))
-    back = extra * np.array([math.cos(h0), math.sin(h0)])
-    ahead = extra * np.array([math.cos(h1), math.sin(h1)])
-    left = np.vstack((left[0] - back, left, left[-1] + ahead))
-    right = np.vstack((right[0] - back, right, right[-1] + ahead))
-    return Polygon(np.vstack((right, left[::-1])))
 
 
 @settings(max_examples=6, deadline=None)
