@@ -18,7 +18,13 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from splineplan.errors import GeometryError
-from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations, resample_polyline
+from splineplan.geometry import (
+    FloatArray,
+    dedupe_polyline,
+    kernel_floats,
+    polyline_stations,
+    resample_polyline,
+)
 
 #: Spacing [m] at which reference lines are resampled.
 REFERENCE_SPACING = 0.5
@@ -228,7 +234,7 @@ class Corridor:
         the ends are extrapolated along the end segments.
         """
         pts = np.atleast_2d(np.asarray(xy, dtype=float))
-        px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+        px, py = kernel_floats(pts[:, 0]), kernel_floats(pts[:, 1])
         k = _grid_nearest(px, py, self._ref_x, self._ref_y, *self._grid, GRID_RINGS)
         far = np.flatnonzero(k < 0)
         if len(far):  # far from the road (or not a number): a k-d tree
