@@ -41,7 +41,7 @@ _CHECKER = (F1,) * 13 + (f8,) * 5 + (F1,) * 6 + (I1, F2, f8)
 #: between processes) and each loop's signatures. A module compiles in one process: the
 #: loops that call one another live in one module (see :mod:`splineplan.kernels`).
 SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
-    "splineplan.kernels": (11.0, {
+    "splineplan.kernels": (9.3, {
         "upper": ((F1, f8),),
         "lower": ((F1, f8),),
         "road_one": ((f8, f8, f8, f8, *(F1,) * 13, f8, f8, f8, f8, i8),),
@@ -56,7 +56,7 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "optimise": ((F2, F2, F2, F2, F1, F1, F1, I1, F3, I1, I1, I2, B1, B1, i8, f8, f8, i8,
                       i8, nt.Tuple(_CHECKER)),),
     }),
-    "splineplan.roadmap": (10.0, {
+    "splineplan.roadmap": (10.2, {
         "_cull_kernel": ((F2, F2, F2, f8),),
         "_slab": ((f8, f8, f8, f8),),
         "_capsule_on_line": ((f8, f8, f8, f8, f8),),
@@ -71,7 +71,7 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "_bent_kernel": ((F1,) * 5,),
         "_search_kernel": ((i8, I1, I1, F1, I1, F1, I1, i8, f8),),
     }),
-    "splineplan.control_polygon": (5.0, {
+    "splineplan.control_polygon": (4.2, {
         "_bending_system": ((F2, F2, F1, f8),),
         "_hess": ((F1, F1, F1, F1),),
         "_pinned_solve": ((F1, F1, F1, F1, F1, F1, B1, B1, i8, F2, F1),),
@@ -85,17 +85,17 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "_detour_sweep": ((F1, F2, I2, nt.boolean[:, :, ::1], nt.boolean[:, ::1], F2, i8),),
         "_detour_bins": ((I2, i8, i8),),
     }),
-    "splineplan.optimiser": (4.0, {
+    "splineplan.optimiser": (2.0, {
         "_basis_kernel": ((F1, F1, i8, i8),),
         "_evaluate_kernel": ((F2, I1, F3, i8),),
         "_repair_marks": ((I1, I1, I1, I1, F2, F2, i8),),
     }),
-    "splineplan.corridor": (4.0, {
+    "splineplan.corridor": (3.0, {
         "_grid_build": ((F1, F1, f8),),
         "_grid_nearest": ((F1, F1, F1, F1, f8, f8, f8, i8, i8, I1, I1, i8),),
         "_project_kernel": ((F1, F1, I1, F1, F1, F1, F1, F1),),
     }),
-    "splineplan.network": (2.0, {
+    "splineplan.network": (2.5, {
         "_paved_spans": ((F1, F1, F1, F1, F1, F1, F1, I1, f8),),
     }),
     "splineplan.obstacles": (1.0, {
