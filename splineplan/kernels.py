@@ -364,7 +364,8 @@ def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
     return tried, accepted, refused_count, rounds
 
 
-@njit(cache=True)
+# inlined: compiled once, inside optimise (its only caller)
+@njit(cache=True, inline="always")
 def try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
               d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
               first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
@@ -433,7 +434,7 @@ def curvature(ax: float, ay: float, bx: float, by: float) -> float:  # pragma: n
     return np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # as try_moves
 def independent_moves(bad: FloatArray, k: int, budget: int
                       ) -> NDArray[np.int64]:  # pragma: no cover - compiled
     """Control points to move this round: the worst first, then others ``k + 1`` apart."""

@@ -41,7 +41,7 @@ _CHECKER = (F1,) * 13 + (f8,) * 5 + (F1,) * 6 + (I1, F2, f8)
 #: between processes) and each loop's signatures. A module compiles in one process: the
 #: loops that call one another live in one module (see :mod:`splineplan.kernels`).
 SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
-    "splineplan.kernels": (9.3, {
+    "splineplan.kernels": (8.5, {
         "upper": ((F1, f8),),
         "lower": ((F1, f8),),
         "road_one": ((f8, f8, f8, f8, *(F1,) * 13, f8, f8, f8, f8, i8),),
@@ -50,9 +50,6 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "rect_polygon_distance": ((F1, F1, f8, f8),),
         "footprint_slack": ((F1, F1, F1, F1, *_CHECKER),),
         "curvature": ((f8, f8, f8, f8),),
-        "independent_moves": ((F1, i8, i8),),
-        "try_moves": ((I1, F2, F2, F2, F2, F1, F1, F1, I1, F3, I1, I1, f8,
-                       nt.Tuple(_CHECKER)),),
         "optimise": ((F2, F2, F2, F2, F1, F1, F1, I1, F3, I1, I1, I2, B1, B1, i8, f8, f8, i8,
                       i8, nt.Tuple(_CHECKER)),),
     }),
