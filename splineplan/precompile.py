@@ -4,7 +4,7 @@ numba compiles a loop on its first call and caches the machine code on disk (in
 ``__pycache__`` beside the module, or numba's user cache directory where that is not
 writable). Called one after another, the loops of a first run after an install took about
 35 s of CPU before anything moved. :func:`ensure` compiles the ones missing from the cache
-in up to ``os.cpu_count()`` processes (this one and helpers started with ``python -m
+in one process per idle CPU (this one and helpers started with ``python -m
 splineplan.precompile``), each writing its share to the cache, so that the planner then
 loads them.
 
@@ -149,16 +149,27 @@ def share(modules: Sequence[str], jobs: int) -> list[list[str]]:
     return [groups[g] for g in order if groups[g]]
 
 
+def free_cpus() -> int:
+    """CPUs not busy with other work, by the 1-minute load average (at least one). On a
+    busy machine a second process would only share a CPU, for 4-5 s more CPU time."""
+    n = os.cpu_count() or 1
+    try:
+        busy = os.getloadavg()[0]
+    except OSError:  # no load average here
+        return n
+    return max(1, min(n, round(n - busy)))
+
+
 def ensure(jobs: int | None = None, modules: Sequence[str] | None = None) -> float:
     """Compile the loops missing from the disk cache (``modules``: those of :func:`missing`)
-    in up to ``jobs`` processes (``None``: one per CPU), this one included; returns the
-    time it took [s]. A helper process that fails only costs time: whatever it left out
-    compiles on first call."""
+    in up to ``jobs`` processes (``None``: :func:`free_cpus`), this one included; returns
+    the time it took [s]. A helper process that fails only costs time: whatever it left
+    out compiles on first call."""
     t0 = time.perf_counter()
     todo = missing() if modules is None else list(modules)
     if not todo:
         return 0.0
-    groups = share(todo, jobs or os.cpu_count() or 1)
+    groups = share(todo, jobs or free_cpus())
     root = str(Path(__file__).resolve().parent.parent)  # the same splineplan in the helpers
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(
         p for p in (root, os.environ.get("PYTHONPATH")) if p))
@@ -186,7 +197,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m splineplan.precompile",
                                      description=__doc__.splitlines()[0])
     parser.add_argument("--jobs", type=int, default=None,
-                        help="processes to compile in (one per CPU)")
+                        help="processes to compile in (one per idle CPU)")
     parser.add_argument("--here", nargs="+", metavar="MODULE", choices=sorted(SIGNATURES),
                         help="compile these modules' loops in this process only")
     args = parser.parse_args(argv)
