@@ -334,7 +334,9 @@ def _grid_build(rx: FloatArray, ry: FloatArray, cell: float
     key = np.empty(len(rx), dtype=np.int64)
     for v in range(len(rx)):
         key[v] = int((rx[v] - x0) / cell) * ny + int((ry[v] - y0) / cell)
-    order = np.argsort(key, kind="mergesort")
+    # sorted as floats (exact: cell numbers are far below 2**53): the same compiled sort as
+    # the other loops', not a second one for integers
+    order = np.argsort(key.astype(np.float64), kind="mergesort")
     start = np.zeros(nx * ny + 1, dtype=np.int64)
     for v in range(len(rx)):
         start[key[v] + 1] += 1
