@@ -13,7 +13,6 @@ the old code after that file changed.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
@@ -21,17 +20,6 @@ from numba import njit
 from numpy.typing import NDArray
 
 from splineplan.geometry import FloatArray
-
-
-def cached() -> bool:
-    """Whether the compiled loops are in numba's disk cache already (else the first plan
-    of this install compiles them, which takes seconds); ``True`` where that cannot be
-    told."""
-    try:
-        index = optimise._cache._cache_file._index_path  # numba's cache index file
-    except AttributeError:
-        return True
-    return bool(os.path.exists(index))
 
 
 @njit(cache=True)
