@@ -149,15 +149,27 @@ def share(modules: Sequence[str], jobs: int) -> list[list[str]]:
     return [groups[g] for g in order if groups[g]]
 
 
-def free_cpus() -> int:
-    """CPUs not busy with other work, by the 1-minute load average (at least one). On a
-    busy machine a second process would only share a CPU, for 4-5 s more CPU time."""
+def _cpu_times() -> tuple[float, float]:
+    """Idle and total CPU time of the machine so far [clock ticks] (Linux's /proc/stat)."""
+    with open("/proc/stat") as f:
+        ticks = [float(v) for v in f.readline().split()[1:9]]
+    return ticks[3] + ticks[4], sum(ticks)
+
+
+def free_cpus(window: float = 0.2) -> int:
+    """CPUs idle over the next ``window`` [s] (at least one; all of them where that cannot
+    be told). On a busy machine a second process would only share a CPU, for 4-5 s more CPU
+    time; the load average would also count the install that has just run."""
     n = os.cpu_count() or 1
     try:
-        busy = os.getloadavg()[0]
-    except OSError:  # no load average here
+        idle0, total0 = _cpu_times()
+        time.sleep(window)
+        idle1, total1 = _cpu_times()
+    except (OSError, ValueError, IndexError):
         return n
-    return max(1, min(n, round(n - busy)))
+    if total1 <= total0:
+        return n
+    return max(1, min(n, round(n * (idle1 - idle0) / (total1 - total0))))
 
 
 def ensure(jobs: int | None = None, modules: Sequence[str] | None = None) -> float:
