@@ -384,7 +384,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         todo = precompile.missing()
         if todo:
             print(f"splineplan {args.command}: compiling the planner's inner loops, once after "
-                  "an install (about 20 s on two free cores, 30 s on one; cached for later "
+                  "an install (about 17 s on two free cores, 30 s on one; cached for later "
                   "runs)", file=sys.stderr)
             precompile.ensure(modules=todo)
     try:
