@@ -110,3 +110,14 @@ def test_helper_process_fills_the_cache_for_this_one(tmp_path: Path) -> None:
     assert set(after) == set(precompile.SIGNATURES) - {"splineplan.obstacles",
                                                        "splineplan.network"}
     assert list(tmp_path.rglob("*_swept_hulls*.nbi")) and list(tmp_path.rglob("*_paved*.nbi"))
+
+
+def test_modules_are_shared_out_evenly_between_processes() -> None:
+    weight = {m: w for m, (w, _) in precompile.SIGNATURES.items()}
+    groups = precompile.share(list(weight), 2)
+    assert sorted(m for g in groups for m in g) == sorted(weight)
+    loads = [sum(weight[m] for m in g) for g in groups]
+    assert loads[0] >= loads[1]  # the heaviest stays in the calling process
+    assert loads[0] - loads[1] <= max(weight.values())  # largest first: within one module
+    assert precompile.share(list(weight), 1) == [sorted(weight, key=lambda m: -weight[m])]
+    assert 1 <= precompile.free_cpus(0.05) <= (os.cpu_count() or 1)
