@@ -3,7 +3,7 @@
 numba compiles a loop on its first call and caches the machine code on disk (in
 ``__pycache__`` beside the module, or numba's user cache directory where that is not
 writable). Called one after another, the loops of a first run after an install took about
-35 s of CPU before anything moved. :func:`ensure` compiles the ones missing from the cache
+38 s of CPU before anything moved. :func:`ensure` compiles the ones missing from the cache
 in one process per idle CPU (this one and helpers started with ``python -m
 splineplan.precompile``), each writing its share to the cache, so that the planner then
 loads them.
