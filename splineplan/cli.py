@@ -616,11 +616,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     if args.command in _PLANNING:
-        from splineplan.kernels import cached
+        from splineplan import precompile
 
-        if not cached():
-            print(f"splineplan {args.command}: compiling the planner's inner loops on first use "
-                  "(about 30 s; cached for later runs)", file=sys.stderr)
+        todo = precompile.missing()
+        if todo:
+            print(f"splineplan {args.command}: compiling the planner's inner loops, once after "
+                  "an install (about 17 s on two free cores, 30 s on one; cached for later "
+                  "runs)", file=sys.stderr)
+            precompile.ensure(modules=todo)
     try:
         return int(args.func(args))
     except SplineplanError as err:

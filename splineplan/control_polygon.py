@@ -24,7 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import Corridor
 from splineplan.errors import TrajectoryError
-from splineplan.geometry import FloatArray, polyline_stations
+from splineplan.geometry import FloatArray, kernel_floats, polyline_stations
 from splineplan.roadmap import Roadmap
 from splineplan.trajectory_params import TrajectoryParams
 
@@ -211,7 +211,7 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     m = len(origin)
     if m < 3:
         return np.clip(centre, lo, hi)
-    f64 = (np.ascontiguousarray(a, dtype=float) for a in (origin, normal, centre, lo, hi))
+    f64 = (kernel_floats(a) for a in (origin, normal, centre, lo, hi))
     origin, normal, centre, lo, hi = f64
     h0, h1, h2, g = _bending_system(origin, normal, centre, float(weight))
     x, ok = _min_bending_loops(h0, h1, h2, g, lo, hi, int(max_rounds))
@@ -357,7 +357,7 @@ def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatA
     at_lo = np.zeros(m, dtype=np.bool_)
     at_hi = fixed.copy()
     x = np.zeros(m)
-    start = 0
+    start: int | np.int64 = np.int64(0)  # not a literal 0: that compiles _pinned_solve twice
     for _ in range(max_rounds):
         if not _pinned_solve(h0, h1, h2, g, lo, hi, at_lo, at_hi, start, fac, x):
             return x, False
@@ -374,7 +374,7 @@ def _min_bending_loops(h0: FloatArray, h1: FloatArray, h2: FloatArray, g: FloatA
             break
     # primal active set from there: each step stays within the bounds and lowers the
     # objective, so it ends at the optimum
-    start = 0
+    start = np.int64(0)
     for k in range(m):
         x[k] = min(max(x[k], lo[k]), hi[k])
         at_lo[k] = x[k] <= lo[k] and not fixed[k]
@@ -439,38 +439,40 @@ def _leg_fractions(leg_len: FloatArray, empty: NDArray[np.bool_], cap: float, ra
     """Fractions ``(k,)`` at which to split the control polygon's legs of lengths ``leg_len``
     [m] (none of the ``empty`` ones), and the leg of each: pieces of at most ``cap`` [m],
     and with ``smooth`` as :func:`_leg_splits` grows them."""
+    # two passes over plain arrays (a list of arrays would double this loop's compile time)
     n = len(leg_len)
-    frac = np.empty(0)
-    leg = np.empty(0, dtype=np.int64)
-    parts = []
-    owners = []
-    for j in range(n):
-        if empty[j]:
-            continue
-        if smooth:
-            before = leg_len[j - 1] if j > 0 else np.inf
-            after = leg_len[j + 1] if j + 1 < n else np.inf
-            f = _leg_splits(leg_len[j], before, after, cap, ratio)
-        else:
-            pieces = int(np.ceil(leg_len[j] / cap - 1e-9))
-            f = np.empty(max(pieces - 1, 0))
-            for k in range(1, pieces):
-                f[k - 1] = k / max(pieces, 1)
-        if len(f):
-            parts.append(f)
-            owners.append(j)
     total = 0
-    for f in parts:
-        total += len(f)
+    for j in range(n):
+        if not empty[j]:
+            total += len(_leg_pieces(leg_len, j, cap, ratio, smooth))
     frac = np.empty(total)
     leg = np.empty(total, dtype=np.int64)
     at = 0
-    for q in range(len(parts)):
-        f = parts[q]
-        frac[at:at + len(f)] = f
-        leg[at:at + len(f)] = owners[q]
+    for j in range(n):
+        if empty[j]:
+            continue
+        f = _leg_pieces(leg_len, j, cap, ratio, smooth)
+        for q in range(len(f)):
+            frac[at + q] = f[q]
+            leg[at + q] = j
         at += len(f)
     return frac, leg
+
+
+@njit(cache=True)
+def _leg_pieces(leg_len: FloatArray, j: int, cap: float, ratio: float, smooth: bool
+                ) -> FloatArray:  # pragma: no cover - compiled
+    """The fractions of leg ``j`` for :func:`_leg_fractions`."""
+    n = len(leg_len)
+    if smooth:
+        before = leg_len[j - 1] if j > 0 else np.inf
+        after = leg_len[j + 1] if j + 1 < n else np.inf
+        return _leg_splits(leg_len[j], before, after, cap, ratio)
+    pieces = int(np.ceil(leg_len[j] / cap - 1e-9))
+    f = np.empty(max(pieces - 1, 0))
+    for k in range(1, pieces):
+        f[k - 1] = k / max(pieces, 1)
+    return f
 
 
 @njit(cache=True)
@@ -577,16 +579,16 @@ def _simplify(ends: FloatArray, origin: FloatArray, tangent: FloatArray) -> NDAr
     m = len(ends)
     if m <= 2:
         return np.arange(m, dtype=np.int64)
-    return _band_simplify_loop(ends, np.ascontiguousarray(origin, dtype=float),
-                               np.ascontiguousarray(tangent, dtype=float), _TOL)
+    return _band_simplify_loop(ends, kernel_floats(origin),
+                               kernel_floats(tangent), _TOL)
 
 
 def _band_ends(pts: FloatArray, origin: FloatArray, normal: FloatArray, centre: FloatArray,
                half: FloatArray) -> FloatArray:
     """Per vertex ``(m, 3, 2)``: the lower and the upper end of its band, and the vertex."""
-    return np.ascontiguousarray(
+    return kernel_floats(
         np.stack((origin + (centre - half)[:, None] * normal,
-                  origin + (centre + half)[:, None] * normal, pts), axis=1), dtype=float)
+                  origin + (centre + half)[:, None] * normal, pts), axis=1))
 
 
 @njit(cache=True)
@@ -633,7 +635,7 @@ def _band_simplify_loop(ends: FloatArray, origin: FloatArray, tangent: FloatArra
     m = len(ends)
     kept = np.empty(m, dtype=np.int64)
     kept[0] = 0
-    n, i = 1, 0
+    n, i = 1, np.int64(0)  # not a literal 0: that would compile _farthest_from twice
     while i < m - 1:
         i = _farthest_from(ends[i, 2, 0], ends[i, 2, 1], i, m - 1, ends, origin, tangent, tol)
         kept[n] = i

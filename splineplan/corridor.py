@@ -18,7 +18,13 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from splineplan.errors import GeometryError
-from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations, resample_polyline
+from splineplan.geometry import (
+    FloatArray,
+    dedupe_polyline,
+    kernel_floats,
+    polyline_stations,
+    resample_polyline,
+)
 
 #: Spacing [m] at which reference lines are resampled.
 REFERENCE_SPACING = 0.5
@@ -225,7 +231,7 @@ class Corridor:
         the ends are extrapolated along the end segments.
         """
         pts = np.atleast_2d(np.asarray(xy, dtype=float))
-        px, py = np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1])
+        px, py = kernel_floats(pts[:, 0]), kernel_floats(pts[:, 1])
         k = _grid_nearest(px, py, self._ref_x, self._ref_y, *self._grid, GRID_RINGS)
         far = np.flatnonzero(k < 0)
         if len(far):  # far from the road (or not a number): a k-d tree
@@ -325,7 +331,9 @@ def _grid_build(rx: FloatArray, ry: FloatArray, cell: float
     key = np.empty(len(rx), dtype=np.int64)
     for v in range(len(rx)):
         key[v] = int((rx[v] - x0) / cell) * ny + int((ry[v] - y0) / cell)
-    order = np.argsort(key, kind="mergesort")
+    # sorted as floats (exact: cell numbers are far below 2**53): the same compiled sort as
+    # the other loops', not a second one for integers
+    order = np.argsort(key.astype(np.float64), kind="mergesort")
     start = np.zeros(nx * ny + 1, dtype=np.int64)
     for v in range(len(rx)):
         start[key[v] + 1] += 1

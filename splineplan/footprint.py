@@ -26,7 +26,7 @@ from scipy.ndimage import maximum_filter1d, minimum_filter1d
 
 from splineplan import kernels
 from splineplan.corridor import Corridor
-from splineplan.geometry import FloatArray
+from splineplan.geometry import FloatArray, kernel_floats
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import RoadmapParams
 
@@ -66,7 +66,7 @@ class _Checker:
         hl, hw = self.half_length, self.half_width
         pts = np.array([[-hl, -hw], [hl, -hw], [hl, hw], [-hl, hw], [0.0, -hw], [0.0, hw],
                         [0.0, 0.0]])
-        object.__setattr__(self, "body", np.ascontiguousarray(pts.T))
+        object.__setattr__(self, "body", kernel_floats(pts.T))
         # the road's part, once per corridor and vehicle size
         frames, window, corners = self.corridor.derived(
             ("footprint", hl, hw), lambda: _road_frames(self.corridor, hl, hw))
@@ -89,8 +89,8 @@ class _Checker:
         idx = np.repeat(obstacles.offsets[sel] - offsets[:-1], count) + np.arange(offsets[-1])
         verts = obstacles.vertices[idx]
         return cls(corridor, params.vehicle_length / 2.0, params.vehicle_width / 2.0,
-                   params.safety_margin, road_margin, np.ascontiguousarray(verts[:, 0]),
-                   np.ascontiguousarray(verts[:, 1]), offsets, np.ascontiguousarray(b[sel]))
+                   params.safety_margin, road_margin, kernel_floats(verts[:, 0]),
+                   kernel_floats(verts[:, 1]), offsets, kernel_floats(b[sel]))
 
     def stations(self, xy: FloatArray) -> FloatArray:
         """Stations [m] of points ``(n, 2)`` on the reference line (exact projection)."""
@@ -111,7 +111,7 @@ class _Checker:
         if sc is None:
             sc = self.stations(xy)
         to_left, to_right, station = kernels.road_clearance(
-            *_xyh(xy, heading), np.asarray(sc, dtype=float), *self._road_args())
+            *_xyh(xy, heading), kernel_floats(sc), *self._road_args())
         if sides:
             return to_left, to_right
         return np.minimum(to_left, to_right), station
@@ -122,7 +122,7 @@ class _Checker:
         a road edge), and the centres' stations [m] (see :meth:`road`)."""
         if sc is None:
             sc = self.stations(xy)
-        return kernels.footprint_slack(*_xyh(xy, heading), np.asarray(sc, dtype=float),
+        return kernels.footprint_slack(*_xyh(xy, heading), kernel_floats(sc),
                                        *self.slack_args())
 
     def obstacles(self, xy: FloatArray, heading: FloatArray,
@@ -187,6 +187,6 @@ def _road_frames(cor: Corridor, hl: float, hw: float
 
 
 def _xyh(xy: FloatArray, heading: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-    return (np.ascontiguousarray(xy[:, 0], dtype=float),
-            np.ascontiguousarray(xy[:, 1], dtype=float),
-            np.ascontiguousarray(heading, dtype=float))
+    return (kernel_floats(xy[:, 0]),
+            kernel_floats(xy[:, 1]),
+            kernel_floats(heading))

@@ -15,6 +15,21 @@ from numpy.typing import ArrayLike, NDArray
 FloatArray = NDArray[np.float64]
 
 
+def kernel_floats(a: ArrayLike) -> FloatArray:
+    """``a`` as the compiled loops take float arrays: float64, C-contiguous, writeable (a
+    copy where it is not). A read-only or strided array would make numba compile another
+    specialisation of the loop, and the first run after an install would wait for it."""
+    out = np.ascontiguousarray(a, dtype=np.float64)
+    return out if out.flags.writeable else out.copy()
+
+
+def kernel_ints(a: ArrayLike) -> NDArray[np.int64]:
+    """``a`` as the compiled loops take integer arrays: int64, C-contiguous, writeable (see
+    :func:`kernel_floats`)."""
+    out = np.ascontiguousarray(a, dtype=np.int64)
+    return out if out.flags.writeable else out.copy()
+
+
 def heading_from_sumo_angle(angle_deg: ArrayLike) -> FloatArray:
     """Planner heading [rad] from SUMO's angle [deg, 0 = north, clockwise]."""
     return np.asarray(np.radians(90.0 - np.asarray(angle_deg, dtype=float)), dtype=float)

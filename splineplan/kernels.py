@@ -13,7 +13,6 @@ the old code after that file changed.
 
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import numpy as np
@@ -21,17 +20,6 @@ from numba import njit
 from numpy.typing import NDArray
 
 from splineplan.geometry import FloatArray
-
-
-def cached() -> bool:
-    """Whether the compiled loops are in numba's disk cache already (else the first plan
-    of this install compiles them, which takes seconds); ``True`` where that cannot be
-    told."""
-    try:
-        index = optimise._cache._cache_file._index_path  # numba's cache index file
-    except AttributeError:
-        return True
-    return bool(os.path.exists(index))
 
 
 @njit(cache=True)
@@ -153,7 +141,9 @@ def road_clearance(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray, 
     the right [m], stations [m]."""
     n = len(x)
     to_left, to_right, station = np.empty(n), np.empty(n), np.empty(n)
-    i = -1  # the previous sample's segment: samples run along the curve
+    # the previous sample's segment (samples run along the curve); typed int64 from the
+    # start: a literal -1 would compile road_one once more for it
+    i = np.int64(-1)
     for j in range(n):
         i = segment(st, sc[j], i)
         to_left[j], to_right[j], station[j] = road_one(
@@ -178,7 +168,7 @@ def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
     n = len(x)
     road = np.empty(n)
     station = np.empty(n)
-    i = -1  # the previous sample's segment: samples run along the curve
+    i = np.int64(-1)  # the previous sample's segment, as in road_clearance
     for j in range(n):
         # the centre in the frame of the reference segment at its station (from the
         # estimate, one step of refinement)
@@ -202,7 +192,10 @@ def footprint_slack(x: FloatArray, y: FloatArray, h: FloatArray, sc: FloatArray,
             r = min(tl, tr)
         road[j] = r
         station[j] = s_new
-    near = obstacle_clearance(x, y, h, vx, vy, offsets, bbox, hl, hw, obs_margin, 0.0, True)
+    # np.bool_: a literal True would compile obstacle_clearance once more beside the bool
+    # that Python calls pass
+    near = obstacle_clearance(x, y, h, vx, vy, offsets, bbox, hl, hw, obs_margin, 0.0,
+                              np.bool_(True))
     return np.minimum(near - obs_margin, road - road_margin), station
 
 
@@ -312,7 +305,8 @@ def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
             my = ctrl[i, 1] - 0.5 * (ctrl[i - 1, 1] + ctrl[i + 1, 1])
             if np.hypot(mx, my) < 1e-9:
                 eligible[i] = False
-        bad[:] = 0.0
+        for i in range(n):  # loops, not slice assignments: those compile slowly
+            bad[i] = 0.0
         any_slow = False
         for j in range(len(kappa)):
             if kappa[j] > kappa_smax * (1.0 + 1e-9):
@@ -336,7 +330,8 @@ def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
                 refused[chosen[m]] = True
         for m in range(len(chosen)):
             if acc[m]:
-                refused[max(chosen[m] - k, 0):chosen[m] + k + 1] = False
+                for i in range(max(chosen[m] - k, 0), min(chosen[m] + k + 1, n)):
+                    refused[i] = False
         worst = kappa.max()
         if worst < best_worst - 1e-12 and n_acc > 0:
             best_worst = worst
@@ -346,17 +341,19 @@ def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
         else:
             idle += 1
     if kappa.max() > best_worst + 1e-12:
-        ctrl[:] = best[0]
-        pos[:] = best[1]
-        d1[:] = best[2]
-        d2[:] = best[3]
-        kappa[:] = best[4]
-        slack[:] = best[5]
-        station[:] = best[6]
+        b_ctrl, b_pos, b_d1, b_d2, b_kappa, b_slack, b_station = best
+        for i in range(n):
+            ctrl[i, 0], ctrl[i, 1] = b_ctrl[i, 0], b_ctrl[i, 1]
+        for j in range(len(kappa)):
+            pos[j, 0], pos[j, 1] = b_pos[j, 0], b_pos[j, 1]
+            d1[j, 0], d1[j, 1] = b_d1[j, 0], b_d1[j, 1]
+            d2[j, 0], d2[j, 1] = b_d2[j, 0], b_d2[j, 1]
+            kappa[j], slack[j], station[j] = b_kappa[j], b_slack[j], b_station[j]
     return tried, accepted, refused_count, rounds
 
 
-@njit(cache=True)
+# inlined: compiled once, inside optimise (its only caller)
+@njit(cache=True, inline="always")
 def try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
               d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
               first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
@@ -425,7 +422,7 @@ def curvature(ax: float, ay: float, bx: float, by: float) -> float:  # pragma: n
     return np.inf
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")  # as try_moves
 def independent_moves(bad: FloatArray, k: int, budget: int
                       ) -> NDArray[np.int64]:  # pragma: no cover - compiled
     """Control points to move this round: the worst first, then others ``k + 1`` apart."""

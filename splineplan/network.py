@@ -47,7 +47,14 @@ from splineplan.errors import (
     UnknownEdgeError,
     VehicleClassError,
 )
-from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations, resample_polyline
+from splineplan.geometry import (
+    FloatArray,
+    dedupe_polyline,
+    kernel_floats,
+    kernel_ints,
+    polyline_stations,
+    resample_polyline,
+)
 from splineplan.obstacles import Obstacles
 
 log = logging.getLogger(__name__)
@@ -622,7 +629,7 @@ def _packed(polys: list[FloatArray]) -> tuple[FloatArray, FloatArray, IntArray]:
     polys = [p for p in polys if len(p) >= 3]
     offsets = np.concatenate(([0], np.cumsum([len(p) for p in polys]))).astype(np.int64)
     pts = np.concatenate(polys) if polys else np.zeros((0, 2))
-    return np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), offsets
+    return kernel_floats(pts[:, 0]), kernel_floats(pts[:, 1]), offsets
 
 
 def _tail(shape: FloatArray, length: float) -> FloatArray:
@@ -666,7 +673,7 @@ def _clip_to_paved(probe: Corridor, left: FloatArray, right: FloatArray, s0: flo
     corridor's middle, where one does (the rounded kerbs of a junction band can reach
     beyond SUMO's junction outline), and widened to the stretch of the junction's
     ``lanes`` (its internal lanes, which SUMO's vehicles drive) that holds it."""
-    px, py, offsets = paving
+    offsets = paving[2]
     if len(offsets) < 2:
         return
     i0 = int(np.searchsorted(probe.s, s0 - PAVING_PAD, side="left"))
@@ -674,21 +681,27 @@ def _clip_to_paved(probe: Corridor, left: FloatArray, right: FloatArray, s0: flo
     if i1 <= i0:
         return
     # the reference's points and the headings of the segments from them
-    cx = np.ascontiguousarray(probe.reference[i0:i1, 0])
-    cy = np.ascontiguousarray(probe.reference[i0:i1, 1])
+    cx = kernel_floats(probe.reference[i0:i1, 0])
+    cy = kernel_floats(probe.reference[i0:i1, 1])
     h = probe.heading_at(probe.s[i0:i1])
     tx, ty = np.cos(h), np.sin(h)
     mid = (left[i0:i1] + right[i0:i1]) / 2.0
-    lo, hi = _paved_spans(cx, cy, tx, ty, mid, px, py, offsets, PAVING_GAP)
+    lo, hi = _paved_spans(cx, cy, tx, ty, mid, *_kernel_polygons(paving), PAVING_GAP)
     ok = np.isfinite(lo)
     lft = np.where(ok, np.minimum(left[i0:i1], hi), left[i0:i1])
     rgt = np.where(ok, np.maximum(right[i0:i1], lo), right[i0:i1])
     if len(lanes[2]) > 1:
-        lo, hi = _paved_spans(cx, cy, tx, ty, mid, *lanes, PAVING_GAP)
+        lo, hi = _paved_spans(cx, cy, tx, ty, mid, *_kernel_polygons(lanes), PAVING_GAP)
         ok = np.isfinite(lo)
         lft = np.where(ok, np.maximum(lft, hi), lft)
         rgt = np.where(ok, np.minimum(rgt, lo), rgt)
     left[i0:i1], right[i0:i1] = lft, rgt
+
+
+def _kernel_polygons(polys: tuple[FloatArray, FloatArray, IntArray]
+                     ) -> tuple[FloatArray, FloatArray, IntArray]:
+    """Packed polygons (:func:`_packed`, kept read-only) as :func:`_paved_spans` takes them."""
+    return kernel_floats(polys[0]), kernel_floats(polys[1]), kernel_ints(polys[2])
 
 
 @njit(cache=True)

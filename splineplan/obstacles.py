@@ -16,7 +16,13 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.errors import GeometryError
-from splineplan.geometry import FloatArray, box_corners, distance_to_polygons
+from splineplan.geometry import (
+    FloatArray,
+    box_corners,
+    distance_to_polygons,
+    kernel_floats,
+    kernel_ints,
+)
 
 #: Distance [m] from the line between its neighbours below which a point of a swept hull
 #: (:meth:`Obstacles.elongated`) counts as on that line and is left out: the corners of
@@ -208,9 +214,9 @@ class Obstacles:
         if not np.all(np.isfinite(head)):
             raise GeometryError("elongation directions must be finite")
         vert, offsets = _swept_hulls(
-            np.ascontiguousarray(self.vertices[:, 0], dtype=float),
-            np.ascontiguousarray(self.vertices[:, 1], dtype=float),
-            np.asarray(self.offsets, dtype=np.int64), extra * np.cos(head),
+            kernel_floats(self.vertices[:, 0]),
+            kernel_floats(self.vertices[:, 1]),
+            kernel_ints(self.offsets), extra * np.cos(head),
             extra * np.sin(head))
         return Obstacles(vert, offsets, self.ids)
 

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 from splineplan import kernels
 from splineplan.curvature import curvature_from_derivatives
 from splineplan.footprint import _Checker
-from splineplan.geometry import FloatArray
+from splineplan.geometry import FloatArray, kernel_floats, kernel_ints
 from splineplan.trajectory_params import TrajectoryParams
 
 log = logging.getLogger(__name__)
@@ -45,8 +45,8 @@ def _basis(u: FloatArray, t: FloatArray, k: int, n: int) -> tuple[NDArray[np.int
     first and second derivatives with respect to the parameter (Cox-de Boor recursion; at
     ``u = 1`` the left limits).
     """
-    return _basis_kernel(np.ascontiguousarray(u, dtype=float),
-                         np.ascontiguousarray(t, dtype=float), k, n)
+    return _basis_kernel(kernel_floats(u),
+                         kernel_floats(t), k, n)
 
 
 @njit(cache=True, inline="always")
@@ -82,13 +82,15 @@ def _basis_kernel(u: FloatArray, t: FloatArray, k: int, n: int
         tables[0, 0] = 1.0
         for p in range(1, k + 1):
             ext[0] = ext[p + 1] = 0.0
-            ext[1:p + 1] = tables[p - 1, :p]
+            for q in range(p):  # loops, not slices: a slice assignment compiles slowly
+                ext[1 + q] = tables[p - 1, q]
             for q in range(p + 1):
                 # function span - p + q: knots t[i], t[i + 1], t[i + p], t[i + p + 1]
                 ti, ti1, tip, tip1 = tt[k - p + q], tt[k - p + 1 + q], tt[k + q], tt[k + 1 + q]
                 tables[p, q] = (_ratio(u[j] - ti, tip - ti) * ext[q]
                                 + _ratio(tip1 - u[j], tip1 - ti1) * ext[q + 1])
-        vals[0, :, j] = tables[k, :k + 1]
+        for q in range(k + 1):
+            vals[0, q, j] = tables[k, q]
         _derive_into(tables[k - 1, :k], tt, k, k, vals[1, :, j])
         if k >= 2:
             _derive_into(tables[k - 2, :k - 1], tt, k, k - 1, der[:k])
@@ -167,7 +169,7 @@ class _Curve:
     def evaluate(self, ctrl: FloatArray | None = None) -> tuple[FloatArray, FloatArray,
                                                                   FloatArray]:
         """Positions, first and second parameter derivatives ``(m, 2)`` at the samples."""
-        c = np.ascontiguousarray(self.ctrl if ctrl is None else ctrl, dtype=float)
+        c = kernel_floats(self.ctrl if ctrl is None else ctrl)
         return _evaluate_kernel(c, self.first, self.basis, self.k)
 
 
@@ -207,7 +209,7 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
     samples (positions, derivatives, footprint slack, stations) for the optimiser.
     """
     counts = counts.astype(np.int64)  # a copy
-    pool = np.ascontiguousarray(pool, dtype=float)
+    pool = kernel_floats(pool)
     rounds = doubled = stall = 0
     n_pool = len(pool)
     # the candidates' stations: blended by the basis, they estimate the samples' stations,
@@ -400,9 +402,9 @@ class _Optimiser:
         ch = self.checker
         out = kernels.optimise(
             self.ctrl, self.pos, self.d1, self.d2, self.kappa, self.slack, self.station,
-            np.ascontiguousarray(self.first, dtype=np.int64), np.ascontiguousarray(self.basis),
+            kernel_ints(self.first), kernel_floats(self.basis),
             self.lo.astype(np.int64), self.hi.astype(np.int64),
-            np.ascontiguousarray(self.cand, dtype=np.int64), self.movable, self.refused,
+            kernel_ints(self.cand), self.movable, self.refused,
             self.k, p.kappa_smax, p.kappa_max, p.max_iterations, p.patience,
             ch.slack_args())
         tried, accepted, refused, rounds = (int(v) for v in out)

@@ -189,9 +189,12 @@ def plan_corridor(
 
 
 def warm_up() -> None:
-    """Load levels 2 and 3's compiled loops (compile them, on the first run of an
-    install) by planning a short straight road with one obstacle, so that a closed loop's
-    first replan does not pay for it."""
+    """Load levels 2 and 3's compiled loops (compile them in parallel first, on the first
+    run of an install: :func:`splineplan.precompile.ensure`) by planning a short straight
+    road with one obstacle, so that a closed loop's first replan does not pay for it."""
+    from splineplan.precompile import ensure
+
+    ensure()
     road = Corridor.from_boundaries([[0.0, 3.5], [60.0, 3.5]], [[0.0, -3.5], [60.0, -3.5]])
     cars = Obstacles.from_boxes([[30.0, 1.5]], [0.0], 4.5, 1.8)
     plan_corridor(road, cars, [1.0, -1.5], 0.0)

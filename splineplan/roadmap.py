@@ -22,7 +22,13 @@ from splineplan.errors import (
     require_non_negative,
     require_positive,
 )
-from splineplan.geometry import FloatArray, polygon_edges, wrap_angle
+from splineplan.geometry import (
+    FloatArray,
+    kernel_floats,
+    kernel_ints,
+    polygon_edges,
+    wrap_angle,
+)
 from splineplan.obstacles import Obstacles
 
 logger = logging.getLogger(__name__)
@@ -318,7 +324,7 @@ class _Lines:
 
 def _f64(a: ArrayLike) -> FloatArray:
     """A contiguous float64 array (the one array type the compiled loops take)."""
-    return np.ascontiguousarray(a, dtype=float)
+    return kernel_floats(a)
 
 
 def _check_start(corridor: Corridor, s0: float, l0: float) -> None:
@@ -399,7 +405,8 @@ def _cull_kernel(seg_a: FloatArray, seg_b: FloatArray, bbox: FloatArray, r: floa
     spread0 = hi[:, 0].max() - lo[:, 0].min()
     spread1 = hi[:, 1].max() - lo[:, 1].min()
     ax = 1 if spread1 > spread0 else 0
-    order = np.argsort(bbox[:, ax], kind="mergesort")
+    # a contiguous copy: the same sort as _free_kernel's, compiled once
+    order = np.argsort(bbox[:, ax].copy(), kind="mergesort")
     bmin = bbox[order, ax]
     reach = (bbox[:, ax + 2] - bbox[:, ax]).max()
     first = np.searchsorted(bmin, lo[:, ax] - reach, side="left")
@@ -459,11 +466,11 @@ def _free_intervals(
     c, t, n = lines.center, lines.tangent, lines.normal
     vert = obstacles.vertices
     return _free_kernel(
-        li, ob, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-        np.ascontiguousarray(t[:, 0]), np.ascontiguousarray(t[:, 1]),
-        np.ascontiguousarray(n[:, 0]), np.ascontiguousarray(n[:, 1]),
+        li, ob, kernel_floats(c[:, 0]), kernel_floats(c[:, 1]),
+        kernel_floats(t[:, 0]), kernel_floats(t[:, 1]),
+        kernel_floats(n[:, 0]), kernel_floats(n[:, 1]),
         _f64(lines.lo), _f64(lines.hi), _f64(vert[:, 0]), _f64(vert[:, 1]),
-        np.asarray(obstacles.offsets, dtype=np.int64), float(r), span)
+        kernel_ints(obstacles.offsets), float(r), span)
 
 
 @njit(cache=True)
@@ -637,7 +644,7 @@ def _arcs(
     """
     nline = len(lines.lo)
     nband = max(nline - 1, 0)
-    vline = np.ascontiguousarray(vline, dtype=np.int64)
+    vline = kernel_ints(vline)
     head, tail = _arc_pairs(vline, nband)
     be, edge = _band_edges(lines, obstacles, r, nband)
     start, end, _ = polygon_edges(obstacles.vertices, obstacles.offsets)
@@ -904,12 +911,12 @@ def _search(
     """
     order = (np.argsort(vline[arcs[:, 0]], kind="stable") if len(arcs)
              else np.zeros(0, dtype=np.int64))
-    a_from = np.ascontiguousarray(arcs[order, 0], dtype=np.int64)
-    a_to = np.ascontiguousarray(arcs[order, 1], dtype=np.int64)
+    a_from = kernel_ints(arcs[order, 0])
+    a_to = kernel_ints(arcs[order, 1])
     path, steps, reached = _search_kernel(
-        int(source), a_from, a_to, np.ascontiguousarray(arc_len[order], dtype=float),
-        order.astype(np.int64), np.ascontiguousarray(width, dtype=float),
-        np.ascontiguousarray(vline, dtype=np.int64), int(nline), float(wmax))
+        int(source), a_from, a_to, kernel_floats(arc_len[order]),
+        order.astype(np.int64), kernel_floats(width),
+        kernel_ints(vline), int(nline), float(wmax))
     if reached < nline - 1:
         return None, None, int(reached)
     return path, steps, nline - 1
