@@ -293,13 +293,15 @@ def load_network(path: str | Path) -> RoadNetwork:
     p = Path(path)
     if not p.is_file():
         raise NetworkError(f"network file not found: {p}")
+    root = _root_tag(p)  # before sumolib, whose parser leaves the file open on an error
+    if root is not None and root != "net":
+        raise NetworkError(f"{p} is not a SUMO network: its root element is <{root}>, a "
+                           "network's is <net> (netconvert builds one)")
     try:
-        net = sumolib.net.readNet(str(p), withInternal=True, withFoes=False, maxcache=0)
+        # the SAX parser, whether or not lxml is installed (another package may bring it)
+        net = sumolib.net.readNet(str(p), withInternal=True, withFoes=False, maxcache=0,
+                                  lxml=False)
     except Exception as err:  # sumolib raises whatever its XML parser raises
-        root = _root_tag(p)
-        if root is not None and root != "net":
-            raise NetworkError(f"{p} is not a SUMO network: its root element is <{root}>, a "
-                               "network's is <net> (netconvert builds one)") from err
         why = "it is not XML: " if root is None else ""
         raise NetworkError(f"cannot read SUMO network {p}: {why}{err}".splitlines()[0]) from err
     try:
