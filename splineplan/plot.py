@@ -448,6 +448,147 @@ def plot_trajectory(
     return axes[0]
 
 
+def plot_turn(
+    network: RoadNetwork,
+    plan: Any,
+    *,
+    junction: str | None = None,
+    margin: float = 25.0,
+    s_max: float | None = None,
+    kappa_max: float | None = None,
+    path: str | PathLike[str] | None = None,
+    title: str | None = None,
+) -> Any:
+    """A junction turn as the planner took it: the drivable area (the planner's corridor)
+    over SUMO's paving (the junction's outline, the route's lanes and the internal lanes
+    of its connections), level 2's roadmap, the footprint swept along the curve, the curve
+    coloured by speed and the limits it breaks; beside it, the curvature along the curve
+    against the turning limit, with the stretch inside the junction shaded.
+
+    Parameters
+    ----------
+    network
+        The network the plan was made on.
+    plan
+        A :class:`~splineplan.pipeline.Plan` (route, corridor, roadmaps, trajectory).
+    junction
+        Id of the junction to draw (default: the first one the route crosses).
+    margin
+        Room [m] around the junction's outline in the view.
+    s_max, kappa_max
+        Top of the speed colour scale [m/s] and the turning limit [1/m] (defaults: those of
+        :class:`~splineplan.trajectory.TrajectoryParams`).
+
+    Returns
+    -------
+    The figure; artists with gids ``drivable_area``, ``junction``, ``lanes``,
+    ``internal_lanes``, ``swept``, ``trajectory_speed``, ``violations`` (where the curve
+    breaks a limit), ``curvature`` and ``kappa_max``.
+    """
+    from splineplan.trajectory import TrajectoryParams
+
+    tp = TrajectoryParams()
+    top = s_max if s_max is not None else tp.s_max
+    kmax = kappa_max if kappa_max is not None else tp.kappa_max
+    tr, corridor, edges = plan.trajectory, plan.corridor, tuple(plan.route.edges)
+    nodes = [network.to_nodes[network.edge_index(e)] for e in edges[:-1]] \
+        if network.to_nodes else []
+    jid = junction if junction is not None else (nodes[0] if nodes else None)
+    shape = network.junction_shapes.get(jid) if jid is not None else None
+    fig = Figure(figsize=(11.0, 5.6), layout="constrained")
+    ax, axk = fig.subplots(1, 2, width_ratios=(1.35, 1.0))
+    area = corridor.polygon()
+    ax.fill(area[:, 0], area[:, 1], color="#e3f2fd", zorder=0, gid="drivable_area",
+            label="drivable area (the planner's corridor)")
+    lanes = [_lane_outline(ln.shape, ln.width) for e in edges
+             for ln in network.lanes[network.edge_index(e)]]
+    ax.add_collection(PolyCollection(lanes, facecolors="none", edgecolors="0.45",
+                                     linewidths=0.7, zorder=1, gid="lanes",
+                                     label="lanes of the route (SUMO)"))
+    via = {v for c in network.connections if c.from_edge in edges and c.to_edge in edges
+           for v in c.via}
+    inner = [_lane_outline(network.internal_lanes[v].shape, network.internal_lanes[v].width)
+             for v in sorted(via) if v in network.internal_lanes]
+    if inner:
+        ax.add_collection(PolyCollection(inner, facecolors="none", edgecolors="0.3",
+                                         linewidths=0.7, linestyles="--", zorder=1,
+                                         gid="internal_lanes",
+                                         label="internal lanes of the turn (SUMO)"))
+    if shape is not None and len(shape) >= 3:
+        ring = np.vstack((shape, shape[:1]))
+        ax.plot(ring[:, 0], ring[:, 1], color="#333333", lw=1.4, zorder=2, gid="junction",
+                label=f"junction {jid} (SUMO's outline)")
+    for i, rm in enumerate(plan.roadmaps):
+        ax.plot(rm.xy[:, 0], rm.xy[:, 1], ls="none", marker="o", ms=2.5,
+                color=PLAN_COLOURS["graph"], zorder=4, gid="roadmap_path",
+                label="roadmap (level 2)" if i == 0 else None)
+    size = ((plan.roadmaps[0].params.vehicle_length, plan.roadmaps[0].params.vehicle_width)
+            if plan.roadmaps else (4.5, 1.8))
+    ax.add_collection(PolyCollection(list(_footprints(tr, 0.5, size)), facecolors="#ff9800",
+                                     edgecolors="none", alpha=0.06, zorder=3, gid="swept",
+                                     label="footprint swept along the curve"))
+    pts = np.column_stack((tr.x, tr.y))
+    lc = _speed_line(pts, np.asarray(tr.speed, dtype=float), top, lw=2.5,
+                     gid="trajectory_speed", zorder=6,
+                     label="trajectory (level 3), coloured by speed")
+    lc.set_cmap(SPEED_CMAP)
+    ax.add_collection(lc)
+    broken = list(getattr(tr, "violations", ()))
+    if broken:
+        ax.plot([v.x for v in broken], [v.y for v in broken], ls="none", marker="X", ms=9,
+                color="#d32f2f", zorder=8, gid="violations",
+                label="limit broken (worst point)")
+    if shape is not None and len(shape) >= 3:
+        lo, hi = shape.min(axis=0) - margin, shape.max(axis=0) + margin
+    else:
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    cb = fig.colorbar(lc, ax=ax, fraction=0.04, pad=0.01)
+    cb.set_label(f"speed [m/s] (0 .. s_max = {top:.1f})")
+    ax.legend(loc="upper left", fontsize="x-small", framealpha=0.85)
+    # curvature along the curve, the junction's stretch shaded
+    st = corridor.to_sl(pts)[:, 0]
+    inside = np.array([corridor.junction_at(float(x)) is not None for x in st])
+    axk.plot(tr.s, np.abs(tr.curvature), color="#1565c0", lw=1.5, gid="curvature",
+             label="|curvature| of the curve")
+    axk.axhline(kmax, color="#c62828", ls="--", lw=1.2, gid="kappa_max",
+                label=f"turning limit 1/R = {kmax:.3f} 1/m")
+    if inside.any():
+        axk.fill_between(tr.s, 0, 1, where=inside, transform=axk.get_xaxis_transform(),
+                         color="0.85", zorder=0, gid="in_junction", label="inside a junction")
+    for v in broken:
+        if v.kind == "curvature":
+            axk.plot([v.s], [v.value], marker="X", ms=9, color="#d32f2f", ls="none")
+    seen = np.flatnonzero(np.all((pts >= lo) & (pts <= hi), axis=1))
+    axk.set_xlim(*((float(tr.s[seen[0]]), float(tr.s[seen[-1]])) if len(seen) > 1
+                   else (float(tr.s[0]), float(tr.s[-1]))))
+    axk.set_ylim(0.0, max(1.3 * kmax, 1.05 * float(np.max(np.abs(tr.curvature)))))
+    axk.set_xlabel("distance along the trajectory s [m]")
+    axk.set_ylabel("|curvature| [1/m]")
+    axk.grid(True, lw=0.3, alpha=0.5)
+    axk.legend(loc="upper right", fontsize="x-small")
+    why = "; ".join(v.describe().split(",")[0] for v in broken) if broken else "feasible"
+    fig.suptitle(title or f"{' -> '.join(edges)}: {why}", fontsize="medium")
+    if path is not None:
+        _save(ax, path)
+    return fig
+
+
+def _lane_outline(centre: Any, width: float) -> Any:
+    """A lane's outline ``(k, 2)`` [m]: its centre line offset by half its width to each
+    side (normals averaged at the vertices)."""
+    c = np.asarray(centre, dtype=float)
+    d = np.diff(c, axis=0)
+    n = np.column_stack((-d[:, 1], d[:, 0])) / np.maximum(np.hypot(*d.T), 1e-9)[:, None]
+    normal = np.vstack((n[:1], (n[:-1] + n[1:]) / 2.0, n[-1:]))
+    normal /= np.maximum(np.hypot(*normal.T), 1e-9)[:, None]
+    return np.vstack((c + normal * width / 2.0, (c - normal * width / 2.0)[::-1]))
+
+
 def plot_speed_profile(
     trajectory: Any,
     params: Any,

@@ -424,3 +424,38 @@ def test_a_long_bending_plan_gets_a_map_of_the_road_above_its_panels() -> None:
     assert x0 <= poly[:, 0].min() and x1 >= poly[:, 0].max()
     assert y0 <= poly[:, 1].min() and y1 >= poly[:, 1].max()
     assert axes.index(road_map) == 0
+
+
+@pytest.mark.parametrize("net_name, start, end", [("grid.net.xml", "B0C0", "C0C1"),
+                                                   ("city.net.xml", "SWA0", "A0B0")])
+def test_turn_figure_shows_the_junction_the_curve_and_what_it_breaks(
+        tmp_path: Path, net_name: str, start: str, end: str) -> None:
+    """A junction turn's figure: the view holds the junction's outline; the drivable area
+    is the plan's corridor; the curvature panel draws the curve's curvature against the
+    turning limit; the broken limits are marked exactly when the plan is infeasible."""
+    from splineplan.network import load_network
+    from splineplan.pipeline import plan
+    from splineplan.plot import plot_turn
+
+    net = load_network(NETS / net_name)
+    result = plan(net, start, end)
+    fig = plot_turn(net, result, path=tmp_path / "turn.png")
+    assert (tmp_path / "turn.png").stat().st_size > 20_000
+    ax = fig.axes[0]  # the map; then the curvature panel and the colour bar
+    axk = next(a for a in fig.axes if a.get_ylabel().startswith("|curvature|"))
+    node = net.to_nodes[net.edge_index(start)]
+    shape = net.junction_shapes[node]
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    assert x0 <= shape[:, 0].min() and shape[:, 0].max() <= x1
+    assert y0 <= shape[:, 1].min() and shape[:, 1].max() <= y1
+    area = next(p for p in ax.patches if p.get_gid() == "drivable_area")
+    assert np.allclose(area.get_xy()[:-1], result.corridor.polygon())
+    curve = next(line for line in axk.lines if line.get_gid() == "curvature")
+    assert np.allclose(curve.get_ydata(), np.abs(result.trajectory.curvature))
+    limit = next(line for line in axk.lines if line.get_gid() == "kappa_max")
+    assert limit.get_ydata()[0] == pytest.approx(TrajectoryParams().kappa_max)
+    marked = [line for line in ax.lines if line.get_gid() == "violations"]
+    assert bool(marked) == (not result.trajectory.feasible)
+    gids = {c.get_gid() for c in ax.collections}
+    assert {"lanes", "swept", "trajectory_speed"} <= gids
