@@ -83,7 +83,7 @@ def goal_region(cor: Corridor) -> Polygon:
 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m benchmarks oracle")
-    ap.add_argument("--fields", type=int, default=60)
+    ap.add_argument("--fields", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
