@@ -57,10 +57,8 @@ def random_field(rng: np.random.Generator) -> tuple[Corridor, Obstacles]:
     sizes = np.array([KINDS[x] for x in kinds])
     lat = rng.uniform(-half + sizes[:, 1] / 2, half - sizes[:, 1] / 2)
     heads = cor.heading_at(st) + rng.uniform(-0.1, 0.1, k)
-    polys = [Obstacles.from_boxes(cor.to_xy(st[i:i + 1], lat[i:i + 1]), heads[i:i + 1],
-                                  float(sizes[i, 0]), float(sizes[i, 1])).polygon(0)
-             for i in range(k)]
-    return cor, Obstacles.from_polygons(polys, [str(x) for x in kinds])
+    return cor, Obstacles.from_boxes(cor.to_xy(st, lat), heads, sizes[:, 0], sizes[:, 1],
+                                     ids=[str(x) for x in kinds])
 
 
 def extended_road(cor: Corridor, extra: float = 8.0) -> Polygon:

@@ -6,6 +6,25 @@ import contextlib
 import signal
 import threading
 from collections.abc import Iterator
+from typing import Any
+
+
+@contextlib.contextmanager
+def _sigint_handler(handler: Any) -> Iterator[bool]:
+    """SIGINT handled by ``handler`` while the block runs, the old handler back after it;
+    yields whether it could be set (only the main thread can change signal handlers)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield False
+        return
+    try:
+        old = signal.signal(signal.SIGINT, handler)
+    except (ValueError, OSError):  # not possible here (an embedded interpreter)
+        yield False
+        return
+    try:
+        yield True
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 @contextlib.contextmanager
@@ -13,18 +32,8 @@ def sigint_ignored() -> Iterator[None]:
     """Ignore SIGINT (Ctrl-C) while the block runs: a second Ctrl-C while the outputs of an
     interrupted run are written would leave them half written. Only the main thread can
     change signal handlers; elsewhere this does nothing."""
-    if threading.current_thread() is not threading.main_thread():
+    with _sigint_handler(signal.SIG_IGN):
         yield
-        return
-    try:
-        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except (ValueError, OSError):  # not possible here (an embedded interpreter)
-        yield
-        return
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, old)
 
 
 class _Deferred:
@@ -50,8 +59,7 @@ def sigint_deferred() -> Iterator[_Deferred]:
     with the handling it had and ``check()`` does nothing.
     """
     state = _Deferred()
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is signal.SIG_IGN):
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
         yield state
         return
 
@@ -60,13 +68,6 @@ def sigint_deferred() -> Iterator[_Deferred]:
             raise KeyboardInterrupt
         state.requested = True
 
-    try:
-        old = signal.signal(signal.SIGINT, handler)
-    except (ValueError, OSError):
+    with _sigint_handler(handler):
         yield state
-        return
-    try:
-        yield state
-    finally:
-        signal.signal(signal.SIGINT, old)
 

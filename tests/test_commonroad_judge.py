@@ -23,6 +23,9 @@ from splineplan.trajectory import Trajectory, TrajectoryParams, plan_trajectory
 feasibility = pytest.importorskip("commonroad_dc.feasibility.feasibility_checker",
                                   reason="commonroad-drivability-checker is a test extra")
 DT = 0.1
+#: How far [rad] the reached wheel angle may be off the next state's (the reconstruction
+#: differentiates the body's heading).
+STEERING_TOLERANCE = 0.01
 
 
 def commonroad_states(tr: Trajectory, params: TrajectoryParams) -> list:
@@ -101,10 +104,6 @@ def _with_steering(x: np.ndarray, x_sim: np.ndarray, vehicle_dynamics: object,
     return bool(feasibility.position_orientation_feasibility_criteria(
         x, x_sim, vehicle_dynamics, e, d) and abs(x[2] - x_sim[2]) < STEERING_TOLERANCE)
 
-
-#: How far [rad] the reached wheel angle may be off the next state's (the reconstruction
-#: differentiates the body's heading).
-STEERING_TOLERANCE = 0.01
 
 
 @pytest.mark.parametrize("angle", [45.0, -60.0])

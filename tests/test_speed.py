@@ -59,7 +59,7 @@ def test_stop_and_errors() -> None:
         times_from_profile([0.0, 1.0], [0.0, 0.0])
 
 
-def _wheel_angle(kappa: np.ndarray, wheelbase: float) -> np.ndarray:
+def wheel_angle(kappa: np.ndarray, wheelbase: float) -> np.ndarray:
     """The front-wheel angle of a kinematic single-track car whose centre, half the
     wheelbase ahead of the rear axle, runs on curvature ``kappa``, written here from the
     geometry: the rear axle turns about the same centre on radius sqrt(R^2 - (L/2)^2)."""
@@ -86,7 +86,7 @@ def test_the_wheels_keep_up_with_the_curvature(seed: int, rate: float, v0: float
     v = speed_profile(s, limit, a_max=2.0, b_max=4.0, start_speed=v0)
     moving = v[:-1] + v[1:] > 0
     dt = 2 * np.diff(s)[moving] / (v[:-1] + v[1:])[moving]
-    turn = np.abs(np.diff(_wheel_angle(kappa, 2.578)))[moving]
+    turn = np.abs(np.diff(wheel_angle(kappa, 2.578)))[moving]
     assert np.all(turn / dt <= rate * (1 + 1e-9))
     inner = slice(102, 138)
     corner = allowed_speed(kappa[inner], mu=0.7, g=9.81, s_max=13.89)

@@ -233,11 +233,11 @@ def test_infeasible_start_is_reported_not_hidden() -> None:
 def assert_wheels_keep_up(tr: Trajectory, params: TrajectoryParams = TP) -> None:
     """Driven at its speeds, the trajectory turns the front wheels of the kinematic
     single-track car (centre half the wheelbase ahead of the rear axle) no faster than
-    the steering rate: the wheel angle from the rear axle's radius, written here."""
-    L = params.wheelbase
-    radius = 1.0 / np.maximum(np.abs(tr.curvature), 1e-12)
-    angle = np.sign(tr.curvature) * np.arctan(
-        L / np.sqrt(np.maximum(radius**2 - (L / 2) ** 2, 1e-12)))
+    the steering rate (the wheel angle from the rear axle's radius, as the speed tests
+    write it)."""
+    from test_speed import wheel_angle
+
+    angle = wheel_angle(tr.curvature, params.wheelbase)
     dt = np.diff(tr.t)
     ok = np.isfinite(dt) & (dt > 0)
     rate = np.abs(np.diff(angle))[ok] / dt[ok]
