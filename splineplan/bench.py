@@ -8,10 +8,10 @@ lane-change model) and ``sublane`` (SUMO's sublane model, which may shift within
 
 Every run, one case and one driver, runs in a fresh Python process (libsumo holds one
 simulation per process), whichever executor hands the runs out: a local pool of
-``workers`` threads that each start such processes, or a Dask cluster (``scheduler``
-address; the workers must see the output folder and the scenario files, as on one machine
-or a shared file system). Rows come back sorted by case and driver, so that the results do
-not depend on the executor; all randomness comes from the seeds.
+``workers`` threads that each start such processes, or a Ray cluster (``address``; its
+nodes must have splineplan installed and see the output folder and the scenario files, as
+on one machine or a shared file system). Rows come back sorted by case and driver, so that
+the results do not depend on the executor; all randomness comes from the seeds.
 
 Outputs: ``runs.csv`` and ``runs.json`` (one row per run), ``summary.md`` (a table by
 difficulty tier and driver; a success is a safe arrival: no collision, no time off the
@@ -29,6 +29,7 @@ import logging
 import math
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -151,7 +152,7 @@ class BenchResult:
     wall_time
         Wall time [s] of the whole suite.
     executor
-        ``local (N workers)`` or ``dask (ADDRESS)``.
+        ``local (N workers)`` or ``ray (ADDRESS)``.
     files
         Files written (``runs.csv``, ``runs.json``, ``summary.md``, figures).
     interrupted
@@ -517,7 +518,7 @@ def execute_task(task: Mapping[str, Any], *, timeout: float = 1800.0,
 
     The row comes back through ``row.json`` in the run folder; a process that dies without
     writing it gives a failed row with the end of its error output. This function is what
-    every executor calls (a thread of the local pool, a Dask worker). The process runs in
+    every executor calls (a thread of the local pool, a Ray task). The process runs in
     a session of its own, so that a Ctrl-C in the terminal reaches only the suite, which
     stops its runs itself (``processes``, the local pool's).
     """
@@ -617,36 +618,61 @@ def _local(tasks: list[dict[str, Any]], workers: int,
                 wait(late, timeout=STOP_GRACE)
 
 
-def _dask(tasks: list[dict[str, Any]], address: str) -> _Rows:
+def _ray(tasks: list[dict[str, Any]], address: str) -> _Rows:
+    """Rows as the runs finish on a Ray cluster: each run is one task of one CPU that
+    starts the run's process on its node (the package installed there and the output
+    folder on storage the nodes share). When the consumer stops (Ctrl-C), the tasks not
+    finished are cancelled."""
     try:
-        from distributed import Client
-        from distributed import as_completed as dask_completed
+        import ray
     except ImportError as err:
-        raise ParameterError(
-            "--scheduler needs dask.distributed: pip install 'splineplan[dask]'") from err
+        raise ParameterError("--address needs Ray: pip install 'splineplan[ray]'") from err
+    own = not ray.is_initialized()
+    if own:
+        _check_reachable(address)
+        try:
+            ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING,
+                     configure_logging=False)
+        except (ConnectionError, RuntimeError, ValueError) as err:
+            raise ParameterError(f"cannot reach the Ray cluster at {address}: "
+                                 f"{str(err).splitlines()[0] if str(err) else err}") from err
+    remote = ray.remote(num_cpus=1, max_retries=0)(execute_task)
+    refs: list[Any] = []
     try:
-        client = Client(address, timeout=30)
-    except (OSError, TimeoutError) as err:
-        raise ParameterError(f"cannot reach the Dask scheduler at {address}: {err}") from err
-    futures: list[Any] = []
-    try:
-        futures = [client.submit(execute_task, t, pure=False, key=f"bench-{i}-{t['driver']}-"
-                                 f"{t['case']['name']}") for i, t in enumerate(tasks)]
-        index = {f.key: i for i, f in enumerate(futures)}
-        for fut in dask_completed(futures):
-            i = index[fut.key]
+        refs = [remote.remote(t) for t in tasks]
+        index = {ref: i for i, ref in enumerate(refs)}
+        pending = list(refs)
+        while pending:
+            ready, pending = ray.wait(pending, num_returns=1)
+            i = index[ready[0]]
             try:
-                row = fut.result()
-            except Exception as err:  # the worker itself died: a failed row
+                row = ray.get(ready[0])
+            except ray.exceptions.RayError as err:  # the worker itself died: a failed row
                 t = tasks[i]
                 row = _row_head(BenchCase(**t["case"]), t["driver"], Path(t["run_dir"]))
-                row["error"] = row["reason"] = f"Dask task failed: {type(err).__name__}: {err}"
+                row["error"] = row["reason"] = (f"Ray task failed: {type(err).__name__}: "
+                                                f"{str(err).splitlines()[0]}")
             yield i, row
     finally:
-        pending = [f for f in futures if not f.done()]
-        if pending:  # stopped early (Ctrl-C): no more runs on the cluster
-            client.cancel(pending)
-        client.close()
+        with sigint_ignored():
+            for ref in refs:  # stopped early (Ctrl-C): no more runs on the cluster
+                with contextlib.suppress(Exception):
+                    ray.cancel(ref)
+            if own:
+                ray.shutdown()
+
+
+def _check_reachable(address: str) -> None:
+    """A clear error at once where nothing listens at a ``HOST:PORT`` address (Ray itself
+    retries for minutes)."""
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit():
+        return  # "auto", or an address Ray resolves itself
+    try:
+        socket.create_connection((host, int(port)), timeout=10.0).close()
+    except OSError as err:
+        raise ParameterError(f"cannot reach the Ray cluster at {address}: "
+                             f"{err.strerror or err}") from err
 
 
 def run_suite(
@@ -655,7 +681,7 @@ def run_suite(
     out_dir: str | Path,
     drivers: Sequence[str] = DRIVERS,
     workers: int | None = None,
-    scheduler: str | None = None,
+    address: str | None = None,
     progress: bool = True,
     plots: bool = True,
 ) -> BenchResult:
@@ -663,7 +689,8 @@ def run_suite(
     and (``plots``) the figures into ``out_dir``.
 
     ``workers``: processes at a time on this machine (default: the number of cores);
-    ``scheduler``: a Dask scheduler's address (``tcp://HOST:PORT``) instead. ``progress``:
+    ``address``: a Ray cluster's address (``HOST:PORT`` or ``ray://HOST:PORT``) instead.
+    ``progress``:
     a progress bar on stderr naming the case in hand.
 
     Raises
@@ -685,7 +712,7 @@ def run_suite(
     for t in tasks:  # a row of an earlier suite in the same folder is not one of this one
         Path(t["run_dir"], "row.json").unlink(missing_ok=True)
     n_workers = workers or os.cpu_count() or 1
-    executor = f"dask ({scheduler})" if scheduler else f"local ({n_workers} workers)"
+    executor = f"ray ({address})" if address else f"local ({n_workers} workers)"
     bar = _bar(len(tasks)) if progress else None
     running: dict[int, str] = {}
     lock = threading.Lock()
@@ -701,7 +728,7 @@ def run_suite(
 
     rows: list[dict[str, Any] | None] = [None] * len(tasks)
     t0 = time.perf_counter()
-    stream = _dask(tasks, scheduler) if scheduler else _local(tasks, n_workers, started)
+    stream = _ray(tasks, address) if address else _local(tasks, n_workers, started)
     interrupted = False
     try:
         for i, row in stream:
