@@ -28,7 +28,7 @@ from numpy.typing import ArrayLike
 
 from splineplan.corridor import Corridor
 from splineplan.errors import NoRouteError, RoadBlockedError
-from splineplan.network import RoadNetwork, route_corridor
+from splineplan.network import CarShape, RoadNetwork, route_corridor
 from splineplan.obstacles import Obstacles
 from splineplan.planner import plan_corridor
 from splineplan.roadmap import Roadmap, RoadmapParams
@@ -124,6 +124,9 @@ def plan(
         for the vehicle, or obstacles in it), the edge entered through it is avoided.
     """
     obstacles = obstacles if obstacles is not None else Obstacles.empty()
+    rp = roadmap_params if roadmap_params is not None else RoadmapParams()
+    tp = trajectory_params if trajectory_params is not None else TrajectoryParams()
+    car = CarShape(rp.vehicle_length, rp.vehicle_width, tp.min_turn_radius)
     avoided = list(avoid)
     blocked: list[str] = []
     t_route = t_roadmap = t_traj = 0.0
@@ -132,7 +135,7 @@ def plan(
         t0 = time.perf_counter()
         try:
             route = _forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                                   avoid=avoided, start_pos=start_pos)
+                                   avoid=avoided, start_pos=start_pos, car=car)
         except NoRouteError as err:
             if last is None:
                 raise
@@ -172,12 +175,14 @@ def turnarounds(network: RoadNetwork, route: Route) -> tuple[int, ...]:
 
 
 def _forward_route(network: RoadNetwork, from_edge: str, to_edge: str, *, vclass: str,
-                   weight: str, avoid: Iterable[str], start_pos: float) -> Route:
-    """The shortest route without turnarounds, or the shortest where every route has one."""
+                   weight: str, avoid: Iterable[str], start_pos: float,
+                   car: CarShape | None = None) -> Route:
+    """The shortest route without turnarounds, or the shortest where every route has one;
+    without turns ``car`` cannot make where a route avoids them."""
     try:
         return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos, turnarounds=False)
+                              avoid=avoid, start_pos=start_pos, turnarounds=False, car=car)
     except NoRouteError:
         log.info("every route %s -> %s turns around: planning the shortest", from_edge, to_edge)
         return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos)
+                              avoid=avoid, start_pos=start_pos, car=car)
