@@ -1292,7 +1292,7 @@ class CarShape:
 #: Turns whose internal lanes bend on no radius below this many turning radii, and whose
 #: lanes are wider than the car's swept width, are made without a test (see
 #: :func:`turn_fits`).
-EASY_RADIUS = 1.5
+EASY_RADIUS = 1.0
 #: Where the car may stand on the incoming lanes before the junction, and on the outgoing
 #: lanes after it [m] (within :data:`PAVING_REACH`), for :func:`turn_fits`.
 FIT_BEFORE = (0.0, 4.0)

@@ -4,6 +4,11 @@ Level 1 picks the roads; the route's drivable area becomes a corridor; levels 2 
 along it (:func:`splineplan.planner.plan_corridor`). Where level 2 finds a road closed, the
 closed edge is avoided and level 1 plans again, as the paper's conclusion proposes.
 
+Tight turns. Level 1 gets the vehicle's footprint and turning radius
+(:class:`~splineplan.network.CarShape`, from the roadmap and trajectory parameters) and
+routes round junction turns that this car cannot make within SUMO's paving, where another
+route exists (:func:`splineplan.route.shortest_route`).
+
 Turnarounds. Level 1 is length-optimal and may turn back onto the reverse edge (at a dead
 end, or where a U-turn is shorter than going round a block). A corridor cannot fold back
 on itself, and levels 2 and 3 plan forward motion only, so the pipeline asks level 1 for

@@ -175,10 +175,12 @@ def shortest_route(
     edges = tuple(network.edge_ids[i] for i in path)
     log.debug("route %s -> %s: %d edges, %.1f m", from_edge, to_edge, len(edges), length)
     turns = tuple((network.edge_ids[u], network.edge_ids[v]) for u, v in tight)
-    for (a, b), (u, _) in zip(turns, tight, strict=True):
-        log.warning("route %s -> %s: the turn from edge '%s' to edge '%s' at junction '%s' is "
-                    "too tight for the car (%s) and no route avoids it", from_edge, to_edge,
-                    a, b, network.to_nodes[u] if network.to_nodes else "?", car)
+    if turns:
+        where = "; ".join(
+            f"at junction '{network.to_nodes[u] if network.to_nodes else '?'}' from edge "
+            f"'{a}' to edge '{b}'" for (a, b), (u, _) in zip(turns, tight, strict=True))
+        log.warning("route %s -> %s takes %d turn(s) too tight for the car (%s), as no route "
+                    "avoids them: %s", from_edge, to_edge, len(turns), car, where)
     return Route(edges=edges, length=length, cost=cost, weight=weight, vclass=vclass,
                  start_pos=start_pos, tight_turns=turns)
 
@@ -194,17 +196,25 @@ def _without_tight_turns(
 ) -> tuple[list[int], list[tuple[int, int]]]:
     """The least-cost path without turns the car cannot make (their arcs dropped one
     route at a time: the landmark bounds hold on a graph with fewer arcs), or ``path``
-    and its tight turns where none avoids them."""
+    and its tight turns where none avoids them (within :data:`MAX_TIGHT_DETOURS` tries).
+    Turnarounds are not tested, and a detour may not add one."""
     ids = network.edge_ids
 
     def tight_of(p: list[int]) -> list[tuple[int, int]]:
+        # turnarounds are no forward turn at all: the planner knows them apart
         return [(u, v) for u, v in itertools.pairwise(p)
-                if not turn_fits(network, ids[u], ids[v], vclass, car)]
+                if not turn_fits(network, ids[u], ids[v], vclass, car)
+                and not is_turnaround(network, ids[u], ids[v], vclass)]
+
+    def backs_of(p: list[int]) -> list[tuple[int, int]]:
+        return [(u, v) for u, v in itertools.pairwise(p)
+                if is_turnaround(network, ids[u], ids[v], vclass)]
 
     first = tight_of(path)
     if not first:
         return path, []
     skip = set(first)
+    allowed_backs = set(backs_of(path))  # a detour may not add a turnaround either
     for _ in range(MAX_TIGHT_DETOURS):
         adj = list(adjacency)
         for u in {u for u, _ in skip}:
@@ -212,7 +222,7 @@ def _without_tight_turns(
         alt = dijkstra(adj, path[0], path[-1], blocked, potential)
         if alt is None:
             break
-        bad = tight_of(alt)
+        bad = tight_of(alt) + [b for b in backs_of(alt) if b not in allowed_backs]
         if not bad:
             return alt, []
         skip.update(bad)
