@@ -4,6 +4,11 @@ Level 1 picks the roads; the route's drivable area becomes a corridor; levels 2 
 along it (:func:`splineplan.planner.plan_corridor`). Where level 2 finds a road closed, the
 closed edge is avoided and level 1 plans again, as the paper's conclusion proposes.
 
+Tight turns. Level 1 gets the vehicle's footprint and turning radius
+(:class:`~splineplan.network.CarShape`, from the roadmap and trajectory parameters) and
+routes round junction turns that this car cannot make within SUMO's paving, where another
+route exists (:func:`splineplan.route.shortest_route`).
+
 Turnarounds. Level 1 is length-optimal and may turn back onto the reverse edge (at a dead
 end, or where a U-turn is shorter than going round a block). A corridor cannot fold back
 on itself, and levels 2 and 3 plan forward motion only, so the pipeline asks level 1 for
@@ -28,7 +33,7 @@ from numpy.typing import ArrayLike
 
 from splineplan.corridor import Corridor
 from splineplan.errors import NoRouteError, RoadBlockedError
-from splineplan.network import RoadNetwork, route_corridor
+from splineplan.network import CarShape, RoadNetwork, route_corridor
 from splineplan.obstacles import Obstacles
 from splineplan.planner import plan_corridor
 from splineplan.roadmap import Roadmap, RoadmapParams
@@ -124,6 +129,9 @@ def plan(
         for the vehicle, or obstacles in it), the edge entered through it is avoided.
     """
     obstacles = obstacles if obstacles is not None else Obstacles.empty()
+    rp = roadmap_params if roadmap_params is not None else RoadmapParams()
+    tp = trajectory_params if trajectory_params is not None else TrajectoryParams()
+    car = CarShape(rp.vehicle_length, rp.vehicle_width, tp.min_turn_radius)
     avoided = list(avoid)
     blocked: list[str] = []
     t_route = t_roadmap = t_traj = 0.0
@@ -132,7 +140,7 @@ def plan(
         t0 = time.perf_counter()
         try:
             route = _forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                                   avoid=avoided, start_pos=start_pos)
+                                   avoid=avoided, start_pos=start_pos, car=car)
         except NoRouteError as err:
             if last is None:
                 raise
@@ -172,12 +180,14 @@ def turnarounds(network: RoadNetwork, route: Route) -> tuple[int, ...]:
 
 
 def _forward_route(network: RoadNetwork, from_edge: str, to_edge: str, *, vclass: str,
-                   weight: str, avoid: Iterable[str], start_pos: float) -> Route:
-    """The shortest route without turnarounds, or the shortest where every route has one."""
+                   weight: str, avoid: Iterable[str], start_pos: float,
+                   car: CarShape | None = None) -> Route:
+    """The shortest route without turnarounds, or the shortest where every route has one;
+    without turns ``car`` cannot make where a route avoids them."""
     try:
         return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos, turnarounds=False)
+                              avoid=avoid, start_pos=start_pos, turnarounds=False, car=car)
     except NoRouteError:
         log.info("every route %s -> %s turns around: planning the shortest", from_edge, to_edge)
         return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos)
+                              avoid=avoid, start_pos=start_pos, car=car)

@@ -25,7 +25,7 @@ import numpy as np
 
 from splineplan.errors import NoRouteError, ParameterError, VehicleClassError
 from splineplan.geometry import FloatArray
-from splineplan.network import ClassGraph, RoadNetwork
+from splineplan.network import CarShape, ClassGraph, RoadNetwork, turn_fits
 
 log = logging.getLogger(__name__)
 
@@ -52,6 +52,10 @@ class Route:
         The vehicle class the route is for.
     start_pos
         Position [m] on the first edge the route starts at.
+    tight_turns
+        Turns ``(from_edge, to_edge)`` of the route that the car asked for cannot make
+        within the paving (:func:`splineplan.network.turn_fits`): taken only where no
+        route avoids them; empty where no car was given.
     """
 
     edges: tuple[str, ...]
@@ -60,6 +64,7 @@ class Route:
     weight: str
     vclass: str
     start_pos: float = 0.0
+    tight_turns: tuple[tuple[str, str], ...] = ()
 
     @property
     def origin(self) -> str:
@@ -82,6 +87,7 @@ def shortest_route(
     avoid: Iterable[str] = (),
     start_pos: float = 0.0,
     turnarounds: bool = True,
+    car: CarShape | None = None,
 ) -> Route:
     """The least-cost route from ``from_edge`` to ``to_edge`` for vehicle class ``vclass``.
 
@@ -104,6 +110,12 @@ def shortest_route(
         Whether the route may turn back onto the reverse edge where the only connection
         for that step is a turnaround (SUMO direction ``t``). Planners that drive forward
         only pass ``False``; the route is then the least-cost one without such a step.
+    car
+        The vehicle's footprint and turning radius. Where given, the route avoids junction
+        turns that this car cannot make within the paving (:func:`~splineplan.network.
+        turn_fits`, tested on the turns of each route found, cached per network and car):
+        it is the least-cost route without them where one exists; where none does, the
+        least-cost route, with a logged warning and :attr:`Route.tight_turns` naming them.
 
     Raises
     ------
@@ -139,7 +151,12 @@ def shortest_route(
     search = _search(network, graph, weight)
     adjacency = search.adjacency if turnarounds else _forward(network, graph, search)
     # the landmark bounds hold on the graph without turnarounds too (it only loses arcs)
-    path = dijkstra(adjacency, src, dst, blocked, search.potential(src, dst))
+    potential = search.potential(src, dst)
+    path = dijkstra(adjacency, src, dst, blocked, potential)
+    tight: list[tuple[int, int]] = []
+    if path is not None and car is not None:
+        path, tight = _without_tight_turns(network, vclass, car, adjacency, path, blocked,
+                                           potential)
     if path is None:
         msg = (f"no route from edge '{from_edge}' to edge '{to_edge}' "
                f"for vehicle class '{vclass}'")
@@ -157,8 +174,59 @@ def shortest_route(
     cost = length if weight == "length" else time
     edges = tuple(network.edge_ids[i] for i in path)
     log.debug("route %s -> %s: %d edges, %.1f m", from_edge, to_edge, len(edges), length)
+    turns = tuple((network.edge_ids[u], network.edge_ids[v]) for u, v in tight)
+    if turns:
+        where = "; ".join(
+            f"at junction '{network.to_nodes[u] if network.to_nodes else '?'}' from edge "
+            f"'{a}' to edge '{b}'" for (a, b), (u, _) in zip(turns, tight, strict=True))
+        log.warning("route %s -> %s takes %d turn(s) too tight for the car (%s), as no route "
+                    "avoids them: %s", from_edge, to_edge, len(turns), car, where)
     return Route(edges=edges, length=length, cost=cost, weight=weight, vclass=vclass,
-                 start_pos=start_pos)
+                 start_pos=start_pos, tight_turns=turns)
+
+
+#: Routes :func:`_without_tight_turns` tries before it keeps the tight turns.
+MAX_TIGHT_DETOURS = 16
+
+
+def _without_tight_turns(
+    network: RoadNetwork, vclass: str, car: CarShape,
+    adjacency: list[list[tuple[int, float]]], path: list[int], blocked: set[int],
+    potential: list[float],
+) -> tuple[list[int], list[tuple[int, int]]]:
+    """The least-cost path without turns the car cannot make (their arcs dropped one
+    route at a time: the landmark bounds hold on a graph with fewer arcs), or ``path``
+    and its tight turns where none avoids them (within :data:`MAX_TIGHT_DETOURS` tries).
+    Turnarounds are not tested, and a detour may not add one."""
+    ids = network.edge_ids
+
+    def tight_of(p: list[int]) -> list[tuple[int, int]]:
+        # turnarounds are no forward turn at all: the planner knows them apart
+        return [(u, v) for u, v in itertools.pairwise(p)
+                if not turn_fits(network, ids[u], ids[v], vclass, car)
+                and not is_turnaround(network, ids[u], ids[v], vclass)]
+
+    def backs_of(p: list[int]) -> list[tuple[int, int]]:
+        return [(u, v) for u, v in itertools.pairwise(p)
+                if is_turnaround(network, ids[u], ids[v], vclass)]
+
+    first = tight_of(path)
+    if not first:
+        return path, []
+    skip = set(first)
+    allowed_backs = set(backs_of(path))  # a detour may not add a turnaround either
+    for _ in range(MAX_TIGHT_DETOURS):
+        adj = list(adjacency)
+        for u in {u for u, _ in skip}:
+            adj[u] = [(w, c) for w, c in adjacency[u] if (u, w) not in skip]
+        alt = dijkstra(adj, path[0], path[-1], blocked, potential)
+        if alt is None:
+            break
+        bad = tight_of(alt) + [b for b in backs_of(alt) if b not in allowed_backs]
+        if not bad:
+            return alt, []
+        skip.update(bad)
+    return path, first
 
 
 def dijkstra(

@@ -1,0 +1,162 @@
+"""Junction turns as a car uses them: the planner on routes of two edges, judged inside the
+turn's paving (the allowed lanes of both edges, SUMO's junction outline, the connection's
+internal lanes; benchmarks/turns.py builds it from the network file with sumolib and
+shapely) by shapely and by the kinematic oracle; and level 1 knowing the turns that no car
+of its size can make."""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import NETS
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from benchmarks.kinematic_oracle import Car, Search, drive
+from benchmarks.turns import TurnBuilder, outside, turns_of
+from splineplan.errors import ParameterError
+from splineplan.network import CarShape, RoadNetwork, load_network, turn_fits
+from splineplan.pipeline import plan
+from splineplan.route import shortest_route
+
+#: How far [m] a footprint may reach beyond the paving (shapely's buffers of curved lanes,
+#: the curve's sampling every few decimetres).
+TOL = 0.05
+SEARCH = Search(step=0.05)
+
+
+@cache
+def _net(name: str) -> tuple[RoadNetwork, TurnBuilder, list[tuple[str, str]]]:
+    path = NETS / f"{name}.net.xml"
+    return load_network(path), TurnBuilder(path), turns_of(path)
+
+
+@settings(max_examples=8, deadline=None)
+@given(name=st.sampled_from(["city", "grid"]), k=st.integers(0, 10_000))
+def test_a_feasible_junction_turn_stays_on_the_paving(name: str, k: int) -> None:
+    """A random junction turn of the bundled networks, planned from the benchmark's start
+    pose: where the trajectory says it is feasible, the footprint along it stays inside the
+    turn's paving (shapely); the pipeline keeps the turn unless level 1 finds it too tight
+    for the car."""
+    net, builder, turns = _net(name)
+    a, b = turns[k % len(turns)]
+    turn = builder.turn(a, b)
+    p = plan(net, a, b, start_pos=turn.start_pos, start_xy=turn.start[:2],
+             start_heading=turn.start[2])
+    tr = p.trajectory
+    if tr.feasible:
+        assert outside(turn, np.asarray(tr.x), np.asarray(tr.y),
+                       np.asarray(tr.heading)) <= TOL
+    if turn_fits(net, a, b, "passenger", CarShape()):
+        assert p.route.edges == (a, b)
+
+
+#: The city's turns that the kinematic oracle cannot drive from the benchmark's start
+#: (``python -m benchmarks turns --nets city``; each is checked again below).
+CITY_UNDRIVABLE = [("A2A3", "A3B3"), ("D3E3", "E3E2"), ("E0SE", "SED0"), ("F1F2", "F2G2"),
+                   ("F2G2", "G2G1"), ("G2G1", "G1F1")]
+
+
+@pytest.mark.parametrize(("a", "b"), CITY_UNDRIVABLE)
+def test_level_1_knows_the_city_turns_no_car_can_make(a: str, b: str) -> None:
+    """Each of these turns is undrivable for the 4.5 x 1.8 m car with its 4.2 m turning
+    radius (the oracle finds no path inside the turn's paving), and level 1 knows it."""
+    net, builder, _ = _net("city")
+    turn = builder.turn(a, b)
+    assert not drive(turn.window, [], turn.start, turn.goal, margin=0.0, search=SEARCH).found
+    assert not turn_fits(net, a, b, "passenger", CarShape())
+
+
+def _tight_network(tmp: Path) -> Path:
+    """A network where the shortest route from xa to cg turns left by 145 degrees from one
+    lane into another at a junction of nothing else (ab -> bc at b), and a longer route
+    goes round the block by am, mn, nk, kc with right-angled turns between two-lane roads."""
+    nodes = {"x": (-100, 0), "a": (0, 0), "b": (100, 0), "c": (30, 45), "g": (-60, 45),
+             "m": (0, -40), "n": (200, -40), "k": (200, 45)}
+    edges = [("xa", 2), ("ab", 1), ("bc", 1), ("cg", 2), ("am", 2), ("mn", 2), ("nk", 2),
+             ("kc", 2)]
+    (tmp / "n.nod.xml").write_text(
+        "<nodes>" + "".join(f'<node id="{k}" x="{x}" y="{y}"/>'
+                            for k, (x, y) in nodes.items()) + "</nodes>")
+    (tmp / "n.edg.xml").write_text(
+        "<edges>" + "".join(f'<edge id="{e}" from="{e[0]}" to="{e[1]}" numLanes="{n}" '
+                            'speed="13.89"/>' for e, n in edges) + "</edges>")
+    (tmp / "n.con.xml").write_text(
+        '<connections><connection from="ab" to="bc" fromLane="0" toLane="0"/></connections>')
+    out = tmp / "tight.net.xml"
+    subprocess.run(["netconvert", "-n", str(tmp / "n.nod.xml"), "-e", str(tmp / "n.edg.xml"),
+                    "-x", str(tmp / "n.con.xml"), "--no-turnarounds", "-o", str(out)],
+                   check=True, capture_output=True)
+    return out
+
+
+@pytest.fixture(scope="module")
+def tight(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _tight_network(tmp_path_factory.mktemp("tight"))
+
+
+def test_a_turn_too_tight_for_the_car_is_avoided_by_level_1(tight: Path) -> None:
+    """ab -> bc turns by 145 degrees within SUMO's paving, which the oracle cannot drive
+    with the 4.5 x 1.8 m car and its 4.2 m turning radius; level 1, given the car, takes
+    the longer route round it, and so does the pipeline. A smaller car
+    with a tighter turning circle makes the turn, and level 1 keeps it for that car."""
+    net = load_network(tight)
+    turn = TurnBuilder(tight).turn("ab", "bc")
+    assert not drive(turn.window, [], turn.start, turn.goal, margin=0.0, search=SEARCH).found
+    assert not turn_fits(net, "ab", "bc", "passenger", CarShape())
+    assert shortest_route(net, "xa", "cg").edges == ("xa", "ab", "bc", "cg")  # no car
+    route = shortest_route(net, "xa", "cg", car=CarShape())
+    assert route.edges == ("xa", "am", "mn", "nk", "kc", "cg") and route.tight_turns == ()
+    assert plan(net, "xa", "cg").route.edges == route.edges
+    small = CarShape(length=2.5, width=1.4, min_turn_radius=2.0)
+    assert drive(turn.window, [], turn.start, turn.goal, margin=0.0, search=SEARCH,
+                 car=Car(2.5, 1.4, 2.0)).found
+    assert turn_fits(net, "ab", "bc", "passenger", small)
+    assert shortest_route(net, "xa", "cg", car=small).edges == ("xa", "ab", "bc", "cg")
+
+
+def test_a_route_that_must_take_a_tight_turn_says_so(tight: Path, caplog) -> None:
+    """bc is reached only through the tight turn: the route takes it, and says which turn
+    at which junction (a warning and Route.tight_turns)."""
+    net = load_network(tight)
+    with caplog.at_level(logging.WARNING, logger="splineplan.route"):
+        route = shortest_route(net, "xa", "bc", car=CarShape())
+    assert route.edges == ("xa", "ab", "bc") and route.tight_turns == (("ab", "bc"),)
+    assert "'ab'" in caplog.text and "'bc'" in caplog.text and "junction 'b'" in caplog.text
+
+
+def test_level_1_keeps_every_turn_of_the_grid() -> None:
+    """Every turn of the grid fits the default car (the oracle drives all of them)."""
+    net, _, turns = _net("grid")
+    assert all(turn_fits(net, a, b, "passenger", CarShape()) for a, b in turns)
+
+
+def test_car_shape_is_checked() -> None:
+    with pytest.raises(ParameterError, match="min_turn_radius"):
+        CarShape(min_turn_radius=0.0)
+
+
+def test_a_junction_without_a_shape_is_named(tmp_path: Path, caplog) -> None:
+    """A junction whose outline is missing from the network file: the corridor through it
+    is built from its lanes and internal lanes, and a warning names the junction and the
+    edges."""
+    import re
+
+    from splineplan.network import route_corridor
+
+    text = (NETS / "grid.net.xml").read_text()
+    text, n = re.subn(r'(<junction id="B1" [^>]*?) shape="[^"]*"', r"\1", text)
+    assert n == 1
+    path = tmp_path / "noshape.net.xml"
+    path.write_text(text)
+    net = load_network(path)
+    assert "B1" not in net.junction_shapes
+    with caplog.at_level(logging.WARNING, logger="splineplan.network"):
+        cor = route_corridor(net, shortest_route(net, "A1B1", "B1B0"))
+    assert "junction 'B1'" in caplog.text and "'A1B1'" in caplog.text
+    assert cor.length > 100.0
