@@ -14,6 +14,9 @@ from hypothesis import settings
 settings.register_profile("repeatable", derandomize=True)
 settings.register_profile("explore", derandomize=False)
 settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repeatable"))
+# commonroad-io before 2026 ships protobuf 3 code, which newer protobuf releases load only
+# with their pure-Python implementation (splineplan.commonroad chooses it too)
+os.environ.setdefault("PROTOCOL_BUFFERS_PYTHON_IMPLEMENTATION", "python")
 
 ROOT = Path(__file__).resolve().parent.parent
 NETS = ROOT / "sumo_nets"

@@ -1,0 +1,922 @@
+"""CommonRoad scenarios in, solutions out (the optional extra ``splineplan[commonroad]``).
+
+A CommonRoad scenario holds a lanelet network, static and dynamic obstacles and a planning
+problem: an initial state and a goal region (a position or goal lanelets, a time window, a
+speed and an orientation interval, each optional). :func:`plan` solves it with splineplan's
+three levels:
+
+1. Level 1 (the paper's Dijkstra) on a lanelet graph: an arc to each successor (cost: the
+   lanelet's length) and to each same-direction neighbour (a lane change, cost
+   :data:`LANE_CHANGE_COST`), to any goal lanelet (:func:`lanelet_route`). A goal with a time
+   window only follows the straightest successors far enough for it.
+2. The corridor (:func:`route_corridor`): along the route, each lanelet with its
+   same-direction neighbours; where a static obstacle leaves the route's lanes no passage,
+   the oncoming lane beside them is added as passing space. Static obstacles go to level 2.
+3. Level 3 with the vehicle as CommonRoad models it (:class:`Vehicle`: the kinematic
+   single-track model's wheelbase, steering angle and rate limits; BMW 320i, vehicle
+   type 2, by default). Dynamic obstacles (their trajectories are known) are handled by
+   :func:`splineplan.spacetime.retime` (speed first), and where speed alone cannot keep the
+   margin by planning the path again around the obstacle where the conflict lies.
+4. The goal: the speed is capped (the highest cap that works) so that the car is in the
+   goal region inside its time window with its speed and orientation; the solution ends at
+   the first state that reaches the goal (CommonRoad's own ``GoalRegion.is_reached``).
+
+The solution is written in CommonRoad's solution format (:func:`write_solution`) as KS
+states: the planner's centre path is converted to the single-track model's state
+(:func:`ks_states`). Everything from commonroad-io is imported inside the functions, so that
+the package works without the extra; without it they raise one clear error.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from splineplan.corridor import UNBOUNDED, Corridor
+from splineplan.errors import (
+    GeometryError,
+    NoRouteError,
+    ParameterError,
+    RoadBlockedError,
+    ScenarioError,
+    SplineplanError,
+)
+from splineplan.geometry import FloatArray, dedupe_polyline, wrap_angle
+from splineplan.obstacles import Obstacles
+from splineplan.roadmap import RoadmapParams
+from splineplan.speed import speed_profile
+from splineplan.trajectory import Trajectory, TrajectoryParams, _times, speed_limit
+
+log = logging.getLogger(__name__)
+
+#: Cost [m] of a lane change in level 1: a lane change is preferred to a detour longer
+#: than this.
+LANE_CHANGE_COST = 15.0
+#: CommonRoad's vehicle types (``commonroad.common.solution.VehicleType``).
+VEHICLE_TYPES = {1: "FORD_ESCORT", 2: "BMW_320i", 3: "VW_VANAGON"}
+#: Time step [s] of the integration that turns the centre path into the car's body
+#: (:func:`ks_states`).
+TOW_STEP = 0.002
+#: Lowest speed cap [m/s] tried to meet a goal's time window.
+MIN_CAP = 0.5
+#: Cost function named in the solutions (CommonRoad's ``SM1``: acceleration, jerk, lane
+#: deviation, path length, time).
+COST_FUNCTION = "SM1"
+#: Margin [m] kept from moving obstacles by the space-time speed plan.
+MOVING_MARGIN = 0.5
+#: How far [m] beyond the goal the corridor runs (the goal lanelets' successors), so
+#: that the curve does not end on the goal's edge.
+RUN_ON = 40.0
+
+
+def _require() -> None:
+    """Raise one clear error when the CommonRoad extra is missing.
+
+    commonroad-io before 2026 ships protobuf code generated for protobuf 3, which newer
+    protobuf releases load only with their pure-Python implementation: that is chosen here
+    unless the process chose already.
+    """
+    os.environ.setdefault("PROTOCOL_BUFFERS_PYTHON_IMPLEMENTATION", "python")
+    try:
+        import commonroad  # noqa: F401
+    except ImportError as err:
+        raise SplineplanError("CommonRoad support needs the commonroad extra: "
+                              "pip install 'splineplan[commonroad]'") from err
+
+
+# -- the vehicle --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Vehicle:
+    """A CommonRoad vehicle type as the kinematic single-track (KS) model sees it.
+
+    Attributes
+    ----------
+    type_id
+        CommonRoad's vehicle type (1 Ford Escort, 2 BMW 320i, 3 VW Vanagon).
+    length, width
+        The body [m].
+    wheelbase
+        Front to rear axle [m] (``a + b``).
+    b
+        Rear axle to the centre of gravity [m]: the KS state's position lies there.
+    max_steering_angle, max_steering_rate
+        Front-wheel limits [rad], [rad/s].
+    a_max, v_max
+        Largest acceleration [m/s^2] and speed [m/s].
+    """
+
+    type_id: int
+    length: float
+    width: float
+    wheelbase: float
+    b: float
+    max_steering_angle: float
+    max_steering_rate: float
+    a_max: float
+    v_max: float
+
+    @property
+    def name(self) -> str:
+        """CommonRoad's name of the type (``BMW_320i``)."""
+        return VEHICLE_TYPES[self.type_id]
+
+    def trajectory_params(self, s_max: float) -> TrajectoryParams:
+        """Level 3's parameters for this car at top speed ``s_max`` [m/s]: its wheelbase and
+        steering rate, and a turning radius no tighter than its steering angle allows
+        (nor than splineplan's default kerb-to-kerb circle)."""
+        rear = self.wheelbase / math.tan(self.max_steering_angle)
+        centre = math.hypot(rear, self.wheelbase / 2.0)
+        base = TrajectoryParams()
+        return replace(base, s_max=float(min(s_max, self.v_max)), wheelbase=self.wheelbase,
+                       max_steering_rate=self.max_steering_rate,
+                       min_turn_radius=max(centre, base.min_turn_radius),
+                       a_max=min(base.a_max, self.a_max))
+
+    def roadmap_params(self) -> RoadmapParams:
+        """Level 2's parameters for this car's body."""
+        return RoadmapParams(vehicle_length=self.length, vehicle_width=self.width)
+
+
+@functools.lru_cache(maxsize=8)
+def vehicle(type_id: int) -> Vehicle:
+    """CommonRoad's parameters of vehicle type ``type_id`` (from commonroad-vehicle-models)."""
+    if isinstance(type_id, bool) or type_id not in VEHICLE_TYPES:
+        known = ", ".join(f"{k} ({v})" for k, v in VEHICLE_TYPES.items())
+        raise ParameterError(f"unknown vehicle type {type_id!r}; CommonRoad's are {known}")
+    _require()
+    try:
+        import vehiclemodels.parameters_vehicle1 as p1
+        import vehiclemodels.parameters_vehicle2 as p2
+        import vehiclemodels.parameters_vehicle3 as p3
+    except ImportError as err:
+        raise SplineplanError("CommonRoad support needs the commonroad extra: "
+                              "pip install 'splineplan[commonroad]'") from err
+    p = {1: p1.parameters_vehicle1, 2: p2.parameters_vehicle2,
+         3: p3.parameters_vehicle3}[type_id]()
+    return Vehicle(type_id, float(p.l), float(p.w), float(p.a + p.b), float(p.b),
+                   float(p.steering.max), float(p.steering.v_max),
+                   float(p.longitudinal.a_max), float(p.longitudinal.v_max))
+
+
+# -- reading ------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """A scenario and the planning problem to solve in it (commonroad-io objects)."""
+
+    scenario: Any
+    planning_problem: Any
+    source: str
+
+    @property
+    def dt(self) -> float:
+        """The scenario's time step [s]."""
+        return float(self.scenario.dt)
+
+
+def read(path: str | Path, *, planning_problem_id: int | None = None) -> Problem:
+    """Read a CommonRoad scenario file and one of its planning problems (the first, or
+    ``planning_problem_id``)."""
+    _require()
+    import warnings
+    from xml.etree.ElementTree import ParseError
+
+    from commonroad.common.file_reader import CommonRoadFileReader
+
+    p = Path(path)
+    if not p.exists():
+        raise ScenarioError(f"scenario file not found: {p}")
+    if p.is_dir():
+        raise ScenarioError(f"{p} is a folder, not a CommonRoad scenario file")
+    head = p.read_bytes()[:4096].lower()
+    if b"<commonroad" not in head:
+        raise ScenarioError(f"{p} is not a CommonRoad scenario (no <commonRoad> root element)")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            logging.getLogger("commonroad").setLevel(logging.ERROR)
+            scenario, problems = CommonRoadFileReader(str(p)).open()
+    except (ParseError, ValueError, KeyError, AttributeError, TypeError, AssertionError) as err:
+        raise ScenarioError(f"cannot read CommonRoad scenario {p}: {err}") from err
+    pps = problems.planning_problem_dict
+    if not pps:
+        raise ScenarioError(f"{p} holds no planning problem: nothing to solve")
+    if planning_problem_id is None:
+        pp = pps[sorted(pps)[0]]
+    elif planning_problem_id in pps:
+        pp = pps[planning_problem_id]
+    else:
+        raise ScenarioError(f"{p} has no planning problem {planning_problem_id} (it has "
+                            f"{', '.join(map(str, sorted(pps)))})")
+    return Problem(scenario, pp, str(p))
+
+
+# -- level 1 ------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class LaneletRoute:
+    """Level 1's result on a lanelet network.
+
+    Attributes
+    ----------
+    lanelets
+        Lanelet ids in the order driven; consecutive ones are successors or (a lane change)
+        same-direction neighbours.
+    chain
+        The lanelets one after another along the road: each lane change's first lanelet is
+        left out (its neighbour stands for the same stretch of road).
+    length
+        Length [m] of the chain.
+    lane_changes
+        Number of lane changes.
+    """
+
+    lanelets: tuple[int, ...]
+    chain: tuple[int, ...]
+    length: float
+    lane_changes: int
+
+
+def _lanelet_graph(network: Any) -> tuple[list[int], dict[int, int], list[list[tuple[int, float]]]]:
+    """Lanelet ids, their indices, and the arcs ``(to, cost)`` of each (see the module
+    docstring)."""
+    ids = [ll.lanelet_id for ll in network.lanelets]
+    index = {lid: i for i, lid in enumerate(ids)}
+    adjacency: list[list[tuple[int, float]]] = [[] for _ in ids]
+    for ll in network.lanelets:
+        i = index[ll.lanelet_id]
+        length = float(ll.distance[-1])
+        for nxt in ll.successor:
+            if nxt in index:
+                adjacency[i].append((index[nxt], length))
+        for adj, same in ((ll.adj_left, ll.adj_left_same_direction),
+                          (ll.adj_right, ll.adj_right_same_direction)):
+            if adj is not None and same and adj in index:
+                adjacency[i].append((index[adj], LANE_CHANGE_COST))
+    return ids, index, adjacency
+
+
+def lanelet_route(network: Any, start: Sequence[int], goals: Sequence[int]) -> LaneletRoute:
+    """Least-cost lanelet route from any of ``start`` to any of ``goals`` (ids).
+
+    splineplan's Dijkstra (:func:`splineplan.route.dijkstra`) on the lanelet graph with a
+    virtual source before the starts and a virtual target after the goals.
+    """
+    from splineplan.route import dijkstra
+
+    ids, index, adjacency = _lanelet_graph(network)
+    n = len(ids)
+    source, target = n, n + 1
+    adjacency = [*adjacency, [(index[s], 0.0) for s in start if s in index], []]
+    for g in goals:
+        if g in index:
+            adjacency[index[g]] = [*adjacency[index[g]], (target, 0.0)]
+    path = dijkstra(adjacency, source, target)
+    if path is None:
+        raise NoRouteError(
+            f"no lanelet route from lanelet {', '.join(map(str, start))} to goal lanelet "
+            f"{', '.join(map(str, goals))}: the goal cannot be reached along successors and "
+            "lane changes")
+    return _route_of(network, [ids[i] for i in path[1:-1]])
+
+
+def _route_of(network: Any, lanelets: list[int]) -> LaneletRoute:
+    chain: list[int] = []
+    changes = 0
+    for lid in lanelets:
+        if chain and _same_direction_neighbour(network, chain[-1], lid):
+            chain[-1] = lid
+            changes += 1
+        else:
+            chain.append(lid)
+    length = sum(float(network.find_lanelet_by_id(lid).distance[-1]) for lid in chain)
+    return LaneletRoute(tuple(lanelets), tuple(chain), length, changes)
+
+
+def _same_direction_neighbour(network: Any, a: int, b: int) -> bool:
+    ll = network.find_lanelet_by_id(a)
+    return bool((ll.adj_left == b and ll.adj_left_same_direction)
+                or (ll.adj_right == b and ll.adj_right_same_direction))
+
+
+def follow_road(network: Any, start: int, length: float) -> LaneletRoute:
+    """The lanelets from ``start`` along the straightest successors until ``length`` [m]
+    (or the road's end): the route of a goal that is a time window only."""
+    out = [start]
+    total = float(network.find_lanelet_by_id(start).distance[-1])
+    while total < length:
+        ll = network.find_lanelet_by_id(out[-1])
+        options = [s for s in ll.successor if s not in out]
+        if not options:
+            break
+        head = _end_heading(ll.center_vertices)
+
+        def turn(lid: int, head: float = head) -> float:
+            c = network.find_lanelet_by_id(lid).center_vertices
+            return abs(float(wrap_angle(_end_heading(c[::-1]) + math.pi - head)))
+
+        nxt = min(options, key=turn)
+        out.append(nxt)
+        total += float(network.find_lanelet_by_id(nxt).distance[-1])
+    return _route_of(network, out)
+
+
+def _end_heading(points: FloatArray) -> float:
+    d = points[-1] - points[max(len(points) - 3, 0)]
+    return math.atan2(float(d[1]), float(d[0]))
+
+
+# -- level 2's input ----------------------------------------------------------------------
+def _group(network: Any, lid: int) -> list[Any]:
+    """The lanelet and its same-direction neighbours, from the leftmost to the rightmost."""
+    ll = network.find_lanelet_by_id(lid)
+    left: list[Any] = []
+    cur = ll
+    while cur.adj_left is not None and cur.adj_left_same_direction:
+        cur = network.find_lanelet_by_id(cur.adj_left)
+        if cur in left or cur is ll:
+            break
+        left.append(cur)
+    right: list[Any] = []
+    cur = ll
+    while cur.adj_right is not None and cur.adj_right_same_direction:
+        cur = network.find_lanelet_by_id(cur.adj_right)
+        if cur in right or cur is ll:
+            break
+        right.append(cur)
+    return [*left[::-1], ll, *right]
+
+
+def _oncoming(network: Any, leftmost: Any) -> Any | None:
+    """The oncoming lanelet beside a group's leftmost lanelet, if any."""
+    if leftmost.adj_left is not None and not leftmost.adj_left_same_direction:
+        return network.find_lanelet_by_id(leftmost.adj_left)
+    return None
+
+
+def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
+                   passing: bool = False, keep_goal: Sequence[int] = ()) -> Corridor:
+    """The corridor along ``route.chain``: each lanelet with its same-direction neighbours.
+
+    The reference line is the chain's lanes joined, where possible each section's lane
+    the successor of the previous one (so that it stays in one lane across the sections
+    of a lane change). With ``passing``, where a static obstacle stands on the lanes of a
+    section, the oncoming lane beside them is added (passing space: :func:`plan` asks for
+    it when the route's lanes are blocked). Where the chain ends in goal lanelets
+    ``keep_goal``, the vehicle's centre keeps to them over the last section.
+    """
+    sections = [_group(network, lid) for lid in route.chain]
+    # the reference lane of each section: the previous reference's successor where it is in
+    # the section, else the chain's lanelet
+    refs: list[Any] = []
+    for lid, group in zip(route.chain, sections, strict=True):
+        own = network.find_lanelet_by_id(lid)
+        if refs:
+            succ = [g for g in group if g.lanelet_id in refs[-1].successor]
+            own = succ[0] if succ and own not in succ else own
+        refs.append(own)
+    reference = dedupe_polyline(np.concatenate([r.center_vertices for r in refs]), 1e-3)
+    probe = Corridor.from_reference(reference, np.full(len(reference), 1e3),
+                                    np.full(len(reference), -1e3))
+    left = np.full(len(probe.s), -np.inf)
+    right = np.full(len(probe.s), np.inf)
+    keep_l = np.full(len(probe.s), UNBOUNDED)
+    keep_r = np.full(len(probe.s), -UNBOUNDED)
+    # each section's station window on the reference: its reference lane's ends
+    ends_xy = np.array([r.center_vertices[-1] for r in refs])
+    ends = probe.to_sl(ends_xy)[:, 0]
+    lo = 0.0
+    for i, (group, ref) in enumerate(zip(sections, refs, strict=True)):
+        hi = float(ends[i]) if i + 1 < len(refs) else float(probe.length)
+        hi = max(hi, lo + 1e-3)
+        lanes = list(group)
+        onc = _oncoming(network, group[0])
+        if passing and onc is not None and _touched(group, obstacles):
+            lanes = [onc, *lanes]
+        lb = group[0].left_vertices if lanes[0] is group[0] else lanes[0].right_vertices[::-1]
+        rb = group[-1].right_vertices
+        window = (probe.s >= lo - 1.0) & (probe.s <= hi + 1.0)
+        for line, out, pick in ((lb, left, np.maximum), (rb, right, np.minimum)):
+            sl = _project(probe, line)
+            inside = (sl[:, 0] >= lo - 2.0) & (sl[:, 0] <= hi + 2.0)
+            if inside.sum() < 2:
+                continue
+            order = np.argsort(sl[inside, 0])
+            vals = np.interp(probe.s[window], sl[inside, 0][order], sl[inside, 1][order])
+            out[window] = pick(out[window], vals)
+        if i + 1 == len(refs) and keep_goal and ref.lanelet_id in keep_goal:
+            kl = _project(probe, ref.left_vertices)
+            kr = _project(probe, ref.right_vertices)
+            for sl, arr in ((kl, keep_l), (kr, keep_r)):
+                o = np.argsort(sl[:, 0])
+                arr[window] = np.interp(probe.s[window], sl[o, 0], sl[o, 1])
+        lo = hi
+    bad = ~np.isfinite(left) | ~np.isfinite(right)
+    if bad.all():
+        raise GeometryError(f"lanelet route {' '.join(map(str, route.chain))} has no width")
+    idx = np.arange(len(left))
+    good = ~bad
+    left = np.interp(idx, idx[good], left[good])
+    right = np.interp(idx, idx[good], right[good])
+    right = np.minimum(right, left - 0.5)
+    keeps = (None, None)
+    if keep_goal and np.any(keep_l < UNBOUNDED):
+        keeps = (np.minimum(keep_l, left), np.maximum(keep_r, right))
+    ids = tuple(str(lid) for lid in route.chain)
+    return Corridor(probe.reference, probe.s, left, right, ids, _section_starts(ends),
+                    0.0, keeps[0], keeps[1])
+
+
+def _section_starts(ends: FloatArray) -> FloatArray:
+    return np.maximum.accumulate(np.concatenate(([0.0], np.clip(ends[:-1], 0.0, None))))
+
+
+def _project(probe: Corridor, line: ArrayLike) -> FloatArray:
+    from splineplan.geometry import resample_polyline
+
+    pts = resample_polyline(dedupe_polyline(np.asarray(line, dtype=float), 1e-3), 0.5)
+    return probe.to_sl(pts)
+
+
+def _touched(group: list[Any], obstacles: Obstacles) -> bool:
+    """Whether a static obstacle lies on (or touches) the group's lanes."""
+    if not len(obstacles):
+        return False
+    from shapely import Polygon, unary_union
+
+    road = unary_union([g.polygon.shapely_object for g in group])
+    return any(road.intersects(Polygon(p)) for p in obstacles.polygons())
+
+
+def static_obstacles(scenario: Any) -> Obstacles:
+    """The scenario's static obstacles as polygons (ids as strings)."""
+    polys, ids = [], []
+    for ob in scenario.static_obstacles:
+        for k, poly in enumerate(_shape_polygons(ob.obstacle_shape.rotate_translate_local(
+                ob.initial_state.position, ob.initial_state.orientation))):
+            polys.append(poly)
+            ids.append(str(ob.obstacle_id) + (f".{k}" if k else ""))
+    return Obstacles.from_polygons(polys, ids) if polys else Obstacles.empty()
+
+
+def _shape_polygons(shape: Any) -> list[FloatArray]:
+    """Polygons ``(k, 2)`` of a CommonRoad shape (a shape group: one per member)."""
+    if hasattr(shape, "shapes"):
+        return [p for s in shape.shapes for p in _shape_polygons(s)]
+    if hasattr(shape, "vertices"):
+        return [np.asarray(shape.vertices, dtype=float)]
+    if hasattr(shape, "radius"):
+        a = np.linspace(0.0, 2.0 * math.pi, 16, endpoint=False)
+        return [np.asarray(shape.center) + shape.radius * np.column_stack((np.cos(a),
+                                                                          np.sin(a)))]
+    raise GeometryError(f"CommonRoad shape {type(shape).__name__} is not supported")
+
+
+def moving_obstacles(scenario: Any) -> list[Any]:
+    """The scenario's dynamic obstacles with a known trajectory as
+    :class:`splineplan.spacetime.MovingObstacle` (absolute times [s])."""
+    from splineplan.spacetime import MovingObstacle
+
+    out = []
+    dt = float(scenario.dt)
+    for ob in scenario.dynamic_obstacles:
+        shape = ob.obstacle_shape
+        length = float(getattr(shape, "length", 2.0 * getattr(shape, "radius", 1.0)))
+        width = float(getattr(shape, "width", 2.0 * getattr(shape, "radius", 1.0)))
+        states = [ob.initial_state]
+        pred = ob.prediction
+        if pred is not None and hasattr(pred, "trajectory"):
+            states += list(pred.trajectory.state_list)
+        states = [s for s in states if hasattr(s, "position") and hasattr(s, "orientation")]
+        if len(states) < 2:
+            continue
+        t = np.array([s.time_step * dt for s in states], dtype=float)
+        xy = np.array([s.position for s in states], dtype=float)
+        head = np.array([s.orientation for s in states], dtype=float)
+        keep = np.concatenate(([True], np.diff(t) > 0))
+        out.append(MovingObstacle(str(ob.obstacle_id), t[keep], xy[keep], head[keep],
+                                  length, width))
+    return out
+
+
+# -- the goal -----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Goal:
+    """A planning problem's goal region, each part optional.
+
+    Attributes
+    ----------
+    steps
+        Time-step window ``(lo, hi)`` (CommonRoad's time steps).
+    shapes
+        shapely geometries of each goal state's position (``None``: anywhere).
+    speed, orientation
+        Per goal state: ``(lo, hi)`` [m/s], [rad], or ``None``.
+    lanelets
+        Goal lanelet ids (from the goal's lanelets or the lanelets its position touches).
+    """
+
+    steps: tuple[tuple[int, int], ...]
+    shapes: tuple[Any, ...]
+    speed: tuple[tuple[float, float] | None, ...]
+    orientation: tuple[tuple[float, float] | None, ...]
+    lanelets: tuple[int, ...]
+
+    def reached(self, step: FloatArray, xy: FloatArray, heading: FloatArray,
+                speed: FloatArray) -> FloatArray:
+        """Whether states (time steps, positions ``(n, 2)`` [m], orientations [rad],
+        speeds [m/s]) reach the goal: ``(n,)`` booleans (any of the goal states)."""
+        import shapely
+
+        out = np.zeros(len(step), dtype=bool)
+        for k in range(len(self.steps)):
+            ok = (step >= self.steps[k][0]) & (step <= self.steps[k][1])
+            if self.shapes[k] is not None:
+                ok &= shapely.contains_xy(self.shapes[k], xy[:, 0], xy[:, 1])
+            if self.speed[k] is not None:
+                lo, hi = self.speed[k]  # type: ignore[misc]
+                ok &= (speed >= lo) & (speed <= hi)
+            if self.orientation[k] is not None:
+                lo, hi = self.orientation[k]  # type: ignore[misc]
+                mid = (lo + hi) / 2.0
+                ok &= np.abs(wrap_angle(heading - mid)) <= (hi - lo) / 2.0
+            out |= ok
+        return out
+
+    @property
+    def has_position(self) -> bool:
+        return any(s is not None for s in self.shapes)
+
+
+def goal_of(problem: Problem) -> Goal:
+    """The planning problem's goal region (:class:`Goal`)."""
+    from shapely import unary_union
+
+    goal = problem.planning_problem.goal
+    net = problem.scenario.lanelet_network
+    steps: list[tuple[int, int]] = []
+    shapes: list[Any] = []
+    speeds: list[tuple[float, float] | None] = []
+    orients: list[tuple[float, float] | None] = []
+    lanelets: list[int] = []
+    for k, st in enumerate(goal.state_list):
+        ts = getattr(st, "time_step", None)
+        steps.append((int(ts.start), int(ts.end)) if ts is not None else (0, 10**9))
+        pos = getattr(st, "position", None)
+        if pos is None:
+            shapes.append(None)
+        else:
+            parts = pos.shapes if hasattr(pos, "shapes") else [pos]
+            shapes.append(unary_union([p.shapely_object for p in parts]))
+            given = (goal.lanelets_of_goal_position or {}).get(k)
+            if given:
+                lanelets += [int(x) for x in given]
+            else:
+                for p in parts:
+                    lanelets += [int(x) for x in net.find_lanelet_by_shape(p)]
+        v = getattr(st, "velocity", None)
+        speeds.append((float(v.start), float(v.end)) if v is not None else None)
+        o = getattr(st, "orientation", None)
+        orients.append((float(o.start), float(o.end)) if o is not None else None)
+    return Goal(tuple(steps), tuple(shapes), tuple(speeds), tuple(orients),
+                tuple(dict.fromkeys(lanelets)))
+
+
+# -- the plan -----------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class CommonRoadPlan:
+    """Result of :func:`plan`.
+
+    Attributes
+    ----------
+    problem, vehicle, goal
+        What was solved, and for which car.
+    route, corridor, obstacles
+        Level 1's lanelet route, the corridor along it and the static obstacles (with the
+        moving obstacles' conflict places added where the path was planned around them).
+    trajectory
+        Level 3's trajectory (time from the initial state) up to the goal.
+    states
+        The solution: CommonRoad KS states every ``dt`` from the initial state, ending at
+        the first state that reaches the goal (or at the end of the plan).
+    goal_reached
+        Whether the last state reaches the goal by CommonRoad's ``GoalRegion.is_reached``.
+    yielded, passed
+        Dynamic obstacles the speed plan waits for and passes in front of.
+    plan_seconds
+        Time [s] of levels 1-3, the speed plan among moving obstacles and the goal timing
+        (reading the file and converting the states not counted).
+    """
+
+    problem: Problem
+    vehicle: Vehicle
+    goal: Goal
+    route: LaneletRoute
+    corridor: Corridor
+    obstacles: Obstacles
+    trajectory: Trajectory
+    states: list[Any]
+    goal_reached: bool
+    yielded: tuple[str, ...]
+    passed: tuple[str, ...]
+    plan_seconds: float
+
+
+def plan(problem: Problem, *, vehicle_type: int = 2,
+         roadmap_params: RoadmapParams | None = None) -> CommonRoadPlan:
+    """Solve the planning problem (see the module docstring)."""
+    from splineplan.planner import plan_corridor
+
+    car = vehicle(vehicle_type)
+    t_start = time.perf_counter()
+    sc, pp = problem.scenario, problem.planning_problem
+    net = sc.lanelet_network
+    init = pp.initial_state
+    v0 = float(getattr(init, "velocity", 0.0))
+    head0 = float(init.orientation)
+    direction = np.array([math.cos(head0), math.sin(head0)])
+    # the planner's centre lies half the wheelbase ahead of the rear axle, CommonRoad's
+    # reference point ``b`` ahead of it
+    centre0 = np.asarray(init.position, dtype=float) + (car.wheelbase / 2.0 - car.b) * direction
+    goal = goal_of(problem)
+    rp = roadmap_params or car.roadmap_params()
+    start_ids = _start_lanelets(net, np.asarray(init.position, dtype=float), head0,
+                                problem.source)
+    s_top = max(v0, _goal_top_speed(goal, v0))
+    horizon = max(hi for _, hi in goal.steps) if goal.steps else 0
+    horizon = min(horizon, int(60.0 / problem.dt)) if horizon < 10**9 else int(20 / problem.dt)
+    if goal.lanelets:
+        route = lanelet_route(net, start_ids, goal.lanelets)
+        route = _run_on(net, route)
+    else:
+        route = follow_road(net, start_ids[0], s_top * horizon * problem.dt + 50.0)
+    statics = static_obstacles(sc)
+    tp = car.trajectory_params(max(s_top, 1.0))
+    corridor = route_corridor(net, route, statics, keep_goal=goal.lanelets)
+    moving = _moving(sc)
+    road_ends = not any(net.find_lanelet_by_id(route.chain[-1]).successor)
+    end_speed = 0.0 if road_ends else None
+    obstacles = statics
+    t0 = float(init.time_step) * problem.dt
+    try:
+        tr = plan_corridor(corridor, obstacles, centre0, head0, roadmap_params=rp, params=tp,
+                           start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
+    except RoadBlockedError:
+        # the route's lanes are blocked: the oncoming lane beside them is passing space
+        corridor = route_corridor(net, route, statics, passing=True, keep_goal=goal.lanelets)
+        tr = plan_corridor(corridor, obstacles, centre0, head0, roadmap_params=rp, params=tp,
+                           start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
+    yielded: tuple[str, ...] = ()
+    passed: tuple[str, ...] = ()
+    if moving:
+        tr, obstacles, yielded, passed = _among_moving(
+            tr, moving, corridor, obstacles, centre0, head0, rp, tp, v0, t0, end_speed)
+    tr = _time_for_goal(tr, tp, goal, v0, problem.dt, int(init.time_step), end_speed, moving,
+                        t0)
+    seconds = time.perf_counter() - t_start
+    states = ks_states(tr, car, problem.dt, int(init.time_step), goal=goal)
+    reached = bool(pp.goal.is_reached(states[-1]))
+    return CommonRoadPlan(problem, car, goal, route, corridor, obstacles, tr, states, reached,
+                          yielded, passed, seconds)
+
+
+def _moving(scenario: Any) -> list[Any]:
+    try:
+        return moving_obstacles(scenario)
+    except ImportError:  # pragma: no cover - without the space-time module
+        return []
+
+
+def _among_moving(tr: Trajectory, moving: list[Any], corridor: Corridor, obstacles: Obstacles,
+                  centre0: FloatArray, head0: float, rp: RoadmapParams, tp: TrajectoryParams,
+                  v0: float, t0: float, end_speed: float | None
+                  ) -> tuple[Trajectory, Obstacles, tuple[str, ...], tuple[str, ...]]:
+    """Speed first: retime along the path; where speed alone cannot keep the margin, the
+    conflict's place becomes a static obstacle and the path is planned again (twice at
+    most)."""
+    from splineplan.planner import plan_corridor
+    from splineplan.spacetime import retime
+
+    retimed, sp = retime(tr, moving, tp, t0=t0, margin=MOVING_MARGIN)
+    for _ in range(2):
+        if sp.conflict is None:
+            break
+        more = obstacles + sp.conflict.as_static()
+        try:
+            again = plan_corridor(corridor, more, centre0, head0, roadmap_params=rp, params=tp,
+                                  start_speed=min(v0, tp.s_max),
+                                  end_speed=end_speed).trajectory
+        except SplineplanError as err:
+            log.debug("no path around moving obstacle %s: %s", sp.conflict.obstacle, err)
+            break
+        obstacles = more
+        retimed, sp = retime(again, moving, tp, t0=t0, margin=MOVING_MARGIN)
+    return retimed, obstacles, tuple(sp.yielded), tuple(sp.passed)
+
+
+def _run_on(network: Any, route: LaneletRoute) -> LaneletRoute:
+    """The route with the goal lanelet's straightest successors for :data:`RUN_ON` m."""
+    last = route.chain[-1]
+    more = follow_road(network, last, float(network.find_lanelet_by_id(last).distance[-1])
+                       + RUN_ON)
+    if len(more.chain) <= 1:
+        return route
+    return _route_of(network, [*route.lanelets, *more.lanelets[1:]])
+
+
+def _goal_top_speed(goal: Goal, v0: float) -> float:
+    """Top speed [m/s] to plan with: the goal's upper speed where it has one (at least the
+    start's), else the start's speed and at least 50 km/h."""
+    highs = [s[1] for s in goal.speed if s is not None]
+    return max(v0, min(highs)) if highs else max(v0, 13.89)
+
+
+def _start_lanelets(network: Any, xy: FloatArray, heading: float, source: str) -> list[int]:
+    """The lanelets under the start, the one best aligned with its heading first."""
+    found = network.find_lanelet_by_position([xy])[0]
+    if not found:
+        raise NoRouteError(f"{source}: the initial state ({xy[0]:.1f}, {xy[1]:.1f}) lies on no "
+                           "lanelet")
+
+    def misalign(lid: int) -> float:
+        ll = network.find_lanelet_by_id(lid)
+        c = ll.center_vertices
+        j = int(np.argmin(np.hypot(*(c - xy).T)))
+        j = min(j, len(c) - 2)
+        d = c[j + 1] - c[j]
+        return abs(float(wrap_angle(math.atan2(d[1], d[0]) - heading)))
+
+    return sorted(found, key=misalign)[:1] + [f for f in found if misalign(f) < 0.5][1:]
+
+
+def _time_for_goal(tr: Trajectory, tp: TrajectoryParams, goal: Goal, v0: float, dt: float,
+                   step0: int, end_speed: float | None, moving: list[Any], t0: float
+                   ) -> Trajectory:
+    """The trajectory with the highest speed cap under which it reaches the goal (its
+    time window, speed and orientation), the fastest plan if none does."""
+    limit = np.minimum(speed_limit(tr.s, tr.curvature, tp), tr.speed + 1e-9
+                       if moving else np.inf)
+    fastest = _capped(tr, limit, np.inf, v0, tp, end_speed)
+    caps = [np.inf, *np.geomspace(max(tp.s_max, MIN_CAP), MIN_CAP, 24)]
+    for cap in caps:
+        cand = fastest if cap == np.inf else _capped(tr, limit, cap, v0, tp, end_speed)
+        if _reaches(cand, goal, dt, step0):
+            return cand
+    return fastest
+
+
+def _capped(tr: Trajectory, limit: FloatArray, cap: float, v0: float, tp: TrajectoryParams,
+            end_speed: float | None) -> Trajectory:
+    v = speed_profile(tr.s, np.minimum(limit, cap), a_max=tp.a_max, b_max=tp.b_max,
+                      start_speed=min(v0, float(limit[0])), end_speed=end_speed)
+    return replace(tr, speed=v, t=_times(tr.s, v))
+
+
+def _reaches(tr: Trajectory, goal: Goal, dt: float, step0: int) -> bool:
+    steps, xy, head, v = _sampled(tr, dt, step0, None)
+    return bool(goal.reached(steps, xy, head, v).any())
+
+
+def _sampled(tr: Trajectory, dt: float, step0: int, goal: Goal | None
+             ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """Time steps, centre positions, headings and speeds every ``dt`` [s]; past the end of
+    the trajectory the car stands at its end. With ``goal``: up to the first that reaches it."""
+    end = tr.t[-1] if np.isfinite(tr.t[-1]) else tr.t[np.isfinite(tr.t)][-1]
+    n = int(np.floor(end / dt + 1e-9)) + 1
+    t = np.arange(n, dtype=np.float64) * dt
+    x, y, h, v = centre_at(tr, t)
+    steps = step0 + np.arange(n)
+    xy = np.column_stack((x, y))
+    if goal is not None:
+        hit = np.flatnonzero(goal.reached(steps.astype(float), xy, h, v))
+        if len(hit):
+            k = int(hit[0]) + 1
+            return steps[:k].astype(float), xy[:k], h[:k], v[:k]
+    return steps.astype(float), xy, h, v
+
+
+def centre_at(tr: Trajectory, t: FloatArray) -> tuple[FloatArray, ...]:
+    """The centre's x, y [m], path heading [rad] and speed [m/s] at times ``t`` [s] from
+    the trajectory's start: the speed changes at constant acceleration between samples (as
+    the profile was made), so that positions and speeds agree at any speed, and the pose
+    follows the arc length."""
+    finite = np.isfinite(tr.t)
+    tt, ss, vv = tr.t[finite], tr.s[finite], tr.speed[finite]
+    if len(tt) < 2:
+        tt, ss, vv = np.array([0.0, 1.0]), tr.s[:2], np.zeros(2)
+    i = np.clip(np.searchsorted(tt, t, side="right") - 1, 0, len(tt) - 2)
+    ds = ss[i + 1] - ss[i]
+    acc = (vv[i + 1] ** 2 - vv[i] ** 2) / (2 * np.where(ds > 0, ds, 1.0))
+    tau = np.maximum(t - tt[i], 0.0)
+    # past a stop (speed reaching 0) the car stands
+    t_stop = np.where(acc < 0, vv[i] / np.where(acc < 0, -acc, 1.0), np.inf)
+    tau = np.minimum(tau, t_stop)
+    s = np.minimum(ss[i] + vv[i] * tau + acc * tau**2 / 2, ss[i + 1])
+    v = np.where(t > tt[-1], 0.0 if vv[-1] == 0 else vv[-1], np.maximum(vv[i] + acc * tau, 0.0))
+    s = np.where(t > tt[-1], ss[-1] + (t - tt[-1]) * vv[-1], s)
+    s = np.minimum(s, tr.s[-1])
+    head = np.interp(s, tr.s, np.unwrap(tr.heading))
+    return np.interp(s, tr.s, tr.x), np.interp(s, tr.s, tr.y), head, v
+
+
+def ks_states(tr: Trajectory, car: Vehicle, dt: float, step0: int = 0, *,
+              goal: Goal | None = None) -> list[Any]:
+    """The trajectory every ``dt`` [s] as CommonRoad's KS states (time steps from
+    ``step0``), up to the first that reaches ``goal`` where given.
+
+    The car's body follows from its centre's path as a kinematic single-track car's does:
+    the rear axle, half the wheelbase behind the centre, is towed without slipping
+    sideways (``theta' = v_c . n(theta) / (L / 2)``, integrated every :data:`TOW_STEP`
+    seconds, second order); its speed is the centre's along the body, and the wheel angle
+    gives the body's turn rate, ``tan(delta) = L theta' / v_rear``. The state's position
+    is the rear axle plus ``b`` along the body.
+    """
+    _require()
+    from commonroad.scenario.state import KSState
+
+    steps, _, _, _ = _sampled(tr, dt, step0, goal)
+    n = len(steps)
+    sub = max(round(dt / TOW_STEP), 1)
+    t = np.arange((n - 1) * sub + 1, dtype=np.float64) * (dt / sub)
+    x, y, head, v = centre_at(tr, t)
+    vx, vy = v * np.cos(head), v * np.sin(head)
+    theta = _tow(t, vx, vy, float(head[0]), car.wheelbase / 2.0)
+    rate = np.gradient(theta, t) if len(t) > 1 else np.zeros(1)
+    v_rear = vx * np.cos(theta) + vy * np.sin(theta)
+    wheel = np.arctan2(car.wheelbase * rate, np.maximum(v_rear, 1e-3))
+    wheel = np.where(v_rear < 1e-3, 0.0, wheel)
+    rear = np.column_stack((x - car.wheelbase / 2 * np.cos(theta),
+                            y - car.wheelbase / 2 * np.sin(theta)))
+    cog = rear + car.b * np.column_stack((np.cos(theta), np.sin(theta)))
+    keep = np.arange(0, len(t), sub)
+    return [KSState(position=cog[i], orientation=float(theta[i]),
+                    velocity=float(max(v_rear[i], 0.0)), steering_angle=float(wheel[i]),
+                    time_step=int(step0 + k)) for k, i in enumerate(keep)]
+
+
+def _tow(t: FloatArray, vx: FloatArray, vy: FloatArray, theta0: float, half: float
+         ) -> FloatArray:
+    """The body's heading [rad] of a rear axle towed ``half`` [m] behind a point moving at
+    ``(vx, vy)`` [m/s] (Heun's method)."""
+    theta = np.empty(len(t))
+    theta[0] = theta0
+    h = np.diff(t)
+    for i in range(len(t) - 1):
+        a = theta[i]
+        k1 = (-vx[i] * math.sin(a) + vy[i] * math.cos(a)) / half
+        b = a + h[i] * k1
+        k2 = (-vx[i + 1] * math.sin(b) + vy[i + 1] * math.cos(b)) / half
+        theta[i + 1] = a + h[i] * (k1 + k2) / 2.0
+    return theta
+
+
+# -- the solution -------------------------------------------------------------------------
+def write_solution(result: CommonRoadPlan, out_dir: str | Path) -> Path:
+    """Write the solution in CommonRoad's solution format (KS model, the vehicle type,
+    cost function :data:`COST_FUNCTION`) into ``out_dir``; returns the file's path."""
+    _require()
+    from commonroad.common.solution import (
+        CommonRoadSolutionWriter,
+        CostFunction,
+        PlanningProblemSolution,
+        Solution,
+        VehicleModel,
+        VehicleType,
+    )
+    from commonroad.scenario.trajectory import Trajectory as CRTrajectory
+
+    states = result.states
+    pps = PlanningProblemSolution(
+        planning_problem_id=result.problem.planning_problem.planning_problem_id,
+        vehicle_model=VehicleModel.KS, vehicle_type=VehicleType(result.vehicle.type_id),
+        cost_function=CostFunction[COST_FUNCTION],
+        trajectory=CRTrajectory(states[0].time_step, states))
+    sol = Solution(result.problem.scenario.scenario_id, [pps],
+                   computation_time=result.plan_seconds)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    name = f"solution_{sol.benchmark_id}.xml"
+    CommonRoadSolutionWriter(sol).write_to_file(output_path=str(out), filename=name,
+                                                overwrite=True)
+    return out / name
+
+
+def solution_trajectory(result: CommonRoadPlan) -> Any:
+    """The solution's states as a commonroad-io ``Trajectory``."""
+    from commonroad.scenario.trajectory import Trajectory as CRTrajectory
+
+    return CRTrajectory(result.states[0].time_step, result.states)
+
+
+def lanelet_polygons(scenario: Any) -> list[FloatArray]:
+    """Each lanelet's outline ``(k, 2)`` [m], for pictures."""
+    return [np.vstack((ll.left_vertices, ll.right_vertices[::-1]))
+            for ll in scenario.lanelet_network.lanelets]
