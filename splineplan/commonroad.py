@@ -72,6 +72,9 @@ MIN_CAP = 0.5
 #: Cost function named in the solutions (CommonRoad's ``SM1``: acceleration, jerk, lane
 #: deviation, path length, time).
 COST_FUNCTION = "SM1"
+#: Braking [m/s^2] planned with: a hard stop on a dry road (CommonRoad's KS model allows
+#: up to its ``a_max``, 11.5 m/s^2 for the BMW); splineplan's 4 m/s^2 is a comfortable stop.
+BRAKING = 8.0
 #: Margin [m] kept from moving obstacles by the space-time speed plan.
 MOVING_MARGIN = 0.5
 #: How far [m] beyond the goal the corridor runs (the goal lanelets' successors), so
@@ -140,7 +143,7 @@ class Vehicle:
         return replace(base, s_max=float(min(s_max, self.v_max)), wheelbase=self.wheelbase,
                        max_steering_rate=self.max_steering_rate,
                        min_turn_radius=max(centre, base.min_turn_radius),
-                       a_max=min(base.a_max, self.a_max))
+                       a_max=min(base.a_max, self.a_max), b_max=BRAKING)
 
     def roadmap_params(self) -> RoadmapParams:
         """Level 2's parameters for this car's body."""
@@ -674,40 +677,11 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
         corridor = route_corridor(net, route, statics, passing=True, keep_goal=goal.lanelets)
         tr = plan_corridor(corridor, obstacles, centre0, head0, roadmap_params=rp, params=tp,
                            start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
-    yielded: tuple[str, ...] = ()
-    passed: tuple[str, ...] = ()
-    if moving:
-        tr, obstacles, yielded, passed = _among_moving(
-            tr, moving, corridor, obstacles, centre0, head0, rp, tp, v0, t0, end_speed)
-    tr = _time_for_goal(tr, tp, goal, v0, problem.dt, int(init.time_step), end_speed, moving,
-                        t0)
-    seconds = time.perf_counter() - t_start
-    states = ks_states(tr, car, problem.dt, int(init.time_step), goal=goal)
-    reached = bool(pp.goal.is_reached(states[-1]))
-    return CommonRoadPlan(problem, car, goal, route, corridor, obstacles, tr, states, reached,
-                          yielded, passed, seconds)
-
-
-def _moving(scenario: Any) -> list[Any]:
-    try:
-        return moving_obstacles(scenario)
-    except ImportError:  # pragma: no cover - without the space-time module
-        return []
-
-
-def _among_moving(tr: Trajectory, moving: list[Any], corridor: Corridor, obstacles: Obstacles,
-                  centre0: FloatArray, head0: float, rp: RoadmapParams, tp: TrajectoryParams,
-                  v0: float, t0: float, end_speed: float | None
-                  ) -> tuple[Trajectory, Obstacles, tuple[str, ...], tuple[str, ...]]:
-    """Speed first: retime along the path; where speed alone cannot keep the margin, the
-    conflict's place becomes a static obstacle and the path is planned again (twice at
-    most)."""
-    from splineplan.planner import plan_corridor
-    from splineplan.spacetime import retime
-
-    retimed, sp = retime(tr, moving, tp, t0=t0, margin=MOVING_MARGIN)
-    for _ in range(2):
-        if sp.conflict is None:
+    timing = _Timing(tp, goal, v0, problem.dt, int(init.time_step), t0, end_speed, moving,
+                     car)
+    tr, sp = timing.best(tr)
+    for _ in range(2):  # speed first; the path around a conflict speed cannot resolve
+        if sp is None or sp.conflict is None:
             break
         more = obstacles + sp.conflict.as_static()
         try:
@@ -715,11 +689,37 @@ def _among_moving(tr: Trajectory, moving: list[Any], corridor: Corridor, obstacl
                                   start_speed=min(v0, tp.s_max),
                                   end_speed=end_speed).trajectory
         except SplineplanError as err:
-            log.debug("no path around moving obstacle %s: %s", sp.conflict.obstacle, err)
+            log.debug("no path around moving obstacle %s: %s", sp.conflict.obstacle.id, err)
             break
         obstacles = more
-        retimed, sp = retime(again, moving, tp, t0=t0, margin=MOVING_MARGIN)
-    return retimed, obstacles, tuple(sp.yielded), tuple(sp.passed)
+        tr, sp = timing.best(again)
+    yielded = tuple(sp.yielded) if sp is not None else ()
+    passed = tuple(sp.passed) if sp is not None else ()
+    seconds = time.perf_counter() - t_start
+    states = ks_states(tr, car, problem.dt, int(init.time_step), goal=goal)
+    reached = bool(pp.goal.is_reached(states[-1]))
+    return CommonRoadPlan(problem, car, goal, route, corridor, obstacles, tr, states, reached,
+                          yielded, passed, seconds)
+
+
+def driven(result: CommonRoadPlan) -> Trajectory:
+    """The part of the plan that the solution drives (up to its last state)."""
+    tr = result.trajectory
+    end = (len(result.states) - 1) * result.problem.dt
+    keep = np.flatnonzero(tr.t <= end + 1e-9)
+    n = max(int(keep[-1]) + 2 if len(keep) else 2, 2)
+    n = min(n, len(tr.t))
+    return replace(tr, t=tr.t[:n], x=tr.x[:n], y=tr.y[:n], heading=tr.heading[:n],
+                   speed=tr.speed[:n], curvature=tr.curvature[:n], s=tr.s[:n],
+                   clearance_obstacles=tr.clearance_obstacles[:n],
+                   clearance_road=tr.clearance_road[:n])
+
+
+def _moving(scenario: Any) -> list[Any]:
+    try:
+        return moving_obstacles(scenario)
+    except ImportError:  # pragma: no cover - without the space-time module
+        return []
 
 
 def _run_on(network: Any, route: LaneletRoute) -> LaneletRoute:
@@ -757,27 +757,50 @@ def _start_lanelets(network: Any, xy: FloatArray, heading: float, source: str) -
     return sorted(found, key=misalign)[:1] + [f for f in found if misalign(f) < 0.5][1:]
 
 
-def _time_for_goal(tr: Trajectory, tp: TrajectoryParams, goal: Goal, v0: float, dt: float,
-                   step0: int, end_speed: float | None, moving: list[Any], t0: float
-                   ) -> Trajectory:
-    """The trajectory with the highest speed cap under which it reaches the goal (its
-    time window, speed and orientation), the fastest plan if none does."""
-    limit = np.minimum(speed_limit(tr.s, tr.curvature, tp), tr.speed + 1e-9
-                       if moving else np.inf)
-    fastest = _capped(tr, limit, np.inf, v0, tp, end_speed)
-    caps = [np.inf, *np.geomspace(max(tp.s_max, MIN_CAP), MIN_CAP, 24)]
-    for cap in caps:
-        cand = fastest if cap == np.inf else _capped(tr, limit, cap, v0, tp, end_speed)
-        if _reaches(cand, goal, dt, step0):
-            return cand
-    return fastest
+@dataclass(frozen=True, eq=False)
+class _Timing:
+    """The speed along a path: the fastest among the moving obstacles, under the highest
+    cap with which the goal is reached (its time window, speed and orientation)."""
 
+    tp: TrajectoryParams
+    goal: Goal
+    v0: float
+    dt: float
+    step0: int
+    t0: float
+    end_speed: float | None
+    moving: list[Any]
+    car: Vehicle
 
-def _capped(tr: Trajectory, limit: FloatArray, cap: float, v0: float, tp: TrajectoryParams,
-            end_speed: float | None) -> Trajectory:
-    v = speed_profile(tr.s, np.minimum(limit, cap), a_max=tp.a_max, b_max=tp.b_max,
-                      start_speed=min(v0, float(limit[0])), end_speed=end_speed)
-    return replace(tr, speed=v, t=_times(tr.s, v))
+    def best(self, tr: Trajectory) -> tuple[Trajectory, Any]:
+        """The trajectory with the best speed profile, and the space-time speed plan
+        (``None`` without moving obstacles). Without a cap that reaches the goal: the
+        fastest."""
+        limit = speed_limit(tr.s, tr.curvature, self.tp)
+        first = self.timed(tr, limit, np.inf)
+        if _reaches(first[0], self.goal, self.dt, self.step0):
+            return first
+        for cap in np.geomspace(max(self.tp.s_max, MIN_CAP), MIN_CAP, 16):
+            cand = self.timed(tr, limit, float(cap))
+            if _reaches(cand[0], self.goal, self.dt, self.step0):
+                return cand
+        return first
+
+    def timed(self, tr: Trajectory, limit: FloatArray, cap: float) -> tuple[Trajectory, Any]:
+        """The path with its speed under ``cap`` [m/s]; the cap applies from where braking
+        from the start's speed reaches it."""
+        brake = np.sqrt(np.maximum(self.v0**2 - 2.0 * self.tp.b_max * tr.s, 0.0))
+        lim = np.minimum(limit, np.maximum(cap, brake))
+        if not self.moving:
+            v = speed_profile(tr.s, lim, a_max=self.tp.a_max, b_max=self.tp.b_max,
+                              start_speed=min(self.v0, float(lim[0])),
+                              end_speed=self.end_speed)
+            return replace(tr, speed=v, t=_times(tr.s, v)), None
+        from splineplan.spacetime import retime
+
+        return retime(replace(tr, speed=np.minimum(tr.speed, lim)), self.moving, self.tp,
+                      t0=self.t0, length=self.car.length, width=self.car.width,
+                      margin=MOVING_MARGIN, end_speed=self.end_speed, v_limit=lim)
 
 
 def _reaches(tr: Trajectory, goal: Goal, dt: float, step0: int) -> bool:
@@ -879,34 +902,111 @@ def _tow(t: FloatArray, vx: FloatArray, vy: FloatArray, theta0: float, half: flo
 
 
 # -- the solution -------------------------------------------------------------------------
-def write_solution(result: CommonRoadPlan, out_dir: str | Path) -> Path:
-    """Write the solution in CommonRoad's solution format (KS model, the vehicle type,
-    cost function :data:`COST_FUNCTION`) into ``out_dir``; returns the file's path."""
+def solution(result: CommonRoadPlan) -> Any:
+    """The plan as a commonroad-io ``Solution``: KS model, the vehicle type, cost function
+    :data:`COST_FUNCTION`."""
     _require()
     from commonroad.common.solution import (
-        CommonRoadSolutionWriter,
         CostFunction,
         PlanningProblemSolution,
         Solution,
         VehicleModel,
         VehicleType,
     )
-    from commonroad.scenario.trajectory import Trajectory as CRTrajectory
 
-    states = result.states
     pps = PlanningProblemSolution(
         planning_problem_id=result.problem.planning_problem.planning_problem_id,
         vehicle_model=VehicleModel.KS, vehicle_type=VehicleType(result.vehicle.type_id),
-        cost_function=CostFunction[COST_FUNCTION],
-        trajectory=CRTrajectory(states[0].time_step, states))
-    sol = Solution(result.problem.scenario.scenario_id, [pps],
-                   computation_time=result.plan_seconds)
+        cost_function=CostFunction[COST_FUNCTION], trajectory=solution_trajectory(result))
+    return Solution(result.problem.scenario.scenario_id, [pps],
+                    computation_time=result.plan_seconds)
+
+
+def write_solution(result: CommonRoadPlan, out_dir: str | Path) -> Path:
+    """Write the solution in CommonRoad's solution format into ``out_dir`` (made if
+    missing); returns the file's path."""
+    from commonroad.common.solution import CommonRoadSolutionWriter
+
+    sol = solution(result)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     name = f"solution_{sol.benchmark_id}.xml"
     CommonRoadSolutionWriter(sol).write_to_file(output_path=str(out), filename=name,
                                                 overwrite=True)
     return out / name
+
+
+@dataclass(frozen=True)
+class Certificate:
+    """CommonRoad's drivability checker's verdict on a solution (its ``solution_checker``,
+    as the CommonRoad website judges submissions).
+
+    Attributes
+    ----------
+    collision_free
+        No collision with any obstacle at its time.
+    road_compliant
+        The car's rectangle stays within the road boundary.
+    feasible
+        ``trajectory_feasibility`` with the KS model of the vehicle type.
+    goal_reached
+        The planning problem's goal is reached by some state.
+    starts_right
+        The solution starts at the planning problem's initial state.
+    """
+
+    collision_free: bool
+    road_compliant: bool
+    feasible: bool
+    goal_reached: bool
+    starts_right: bool
+
+    @property
+    def passed(self) -> bool:
+        """All checks passed."""
+        return (self.collision_free and self.road_compliant and self.feasible
+                and self.goal_reached and self.starts_right)
+
+
+def certify(result: CommonRoadPlan) -> Certificate:
+    """Judge the plan's solution with commonroad-drivability-checker (which must be
+    installed)."""
+    return certify_solution(result.problem.scenario, result.problem.planning_problem,
+                            solution(result))
+
+
+def certify_solution(scenario: Any, planning_problem: Any, sol: Any) -> Certificate:
+    """Judge a commonroad-io ``Solution`` of ``planning_problem`` in ``scenario`` (any
+    planner's) with commonroad-drivability-checker."""
+    _require()
+    try:
+        from commonroad_dc.feasibility import solution_checker as sc
+    except ImportError as err:
+        raise SplineplanError("certifying a solution needs commonroad-drivability-checker: "
+                              "pip install commonroad-drivability-checker") from err
+    from commonroad.planning.planning_problem import PlanningProblemSet
+
+    pps = PlanningProblemSet([planning_problem])
+
+    def check(fn: Any, ok_when: bool) -> bool:
+        try:
+            return bool(fn(scenario, pps, sol)) == ok_when
+        except Exception as err:  # the checker signals a failed check by raising
+            log.debug("%s: %s", fn.__name__, err)
+            return False
+
+    try:
+        feasible = all(r[0] for r in sc.solution_feasible(sol, scenario.dt, pps).values())
+    except Exception as err:
+        log.debug("solution_feasible: %s", err)
+        feasible = False
+    try:
+        starts = bool(sc.starts_at_correct_state(sol, pps))
+    except Exception as err:
+        log.debug("starts_at_correct_state: %s", err)
+        starts = False
+    return Certificate(check(sc.obstacle_collision, False), check(sc.boundary_collision, False),
+                       feasible, check(sc.goal_reached, True), starts)
 
 
 def solution_trajectory(result: CommonRoadPlan) -> Any:
@@ -916,7 +1016,34 @@ def solution_trajectory(result: CommonRoadPlan) -> Any:
     return CRTrajectory(result.states[0].time_step, result.states)
 
 
+def lanelet_outline(lanelet: Any) -> FloatArray:
+    """A lanelet's outline ``(k, 2)`` [m]."""
+    return np.vstack((lanelet.left_vertices, lanelet.right_vertices[::-1]))
+
+
 def lanelet_polygons(scenario: Any) -> list[FloatArray]:
     """Each lanelet's outline ``(k, 2)`` [m], for pictures."""
-    return [np.vstack((ll.left_vertices, ll.right_vertices[::-1]))
-            for ll in scenario.lanelet_network.lanelets]
+    return [lanelet_outline(ll) for ll in scenario.lanelet_network.lanelets]
+
+
+def goal_outlines(goal: Goal) -> list[FloatArray]:
+    """The goal positions' outlines ``(k, 2)`` [m], for pictures."""
+    out = []
+    for shape in goal.shapes:
+        if shape is None:
+            continue
+        for g in getattr(shape, "geoms", [shape]):
+            out.append(np.asarray(g.exterior.coords))
+    return out
+
+
+def moving_paths(scenario: Any) -> list[FloatArray]:
+    """Each dynamic obstacle's centre path ``(n, 2)`` [m], for pictures."""
+    out = []
+    for ob in scenario.dynamic_obstacles:
+        pts = [ob.initial_state.position]
+        pred = ob.prediction
+        if pred is not None and hasattr(pred, "trajectory"):
+            pts += [s.position for s in pred.trajectory.state_list]
+        out.append(np.asarray(pts, dtype=float))
+    return out
