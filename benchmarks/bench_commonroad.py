@@ -9,9 +9,9 @@ history, and a seeded sample of the others there. Each is solved by
   state to the goal; its time is the plan's (levels 1-3, the speed plan among the dynamic
   obstacles, the goal timing);
 - the reactive planner (``commonroad-reactive-planner``, its default configuration, the
-  route planner's first route as its reference path), replanning every third step as its
-  own example script does, until the goal is reached, it finds no trajectory, or the
-  goal's last time step passes; its time per cycle is that of ``ReactivePlanner.plan``.
+  route planner's shortest reference path), replanning every third step as its own
+  example script does, until the goal is reached, it finds no trajectory, or the goal's
+  last time step passes; its time per cycle is that of ``ReactivePlanner.plan``.
 
 Both solutions are judged by the same checks (:func:`splineplan.commonroad.certify_solution`:
 collisions with every obstacle at its time, the road boundary, ``trajectory_feasibility``
@@ -61,12 +61,15 @@ def _splineplan(path: Path) -> dict[str, Any]:
 def _reactive(path: Path) -> dict[str, Any]:
     """The reactive planner's run (see the module docstring)."""
     from commonroad.common.file_reader import CommonRoadFileReader
-    from commonroad_route_planner.route_planner import RoutePlanner
     from commonroad_rp.reactive_planner import ReactivePlanner
     from commonroad_rp.utility.config import ReactivePlannerConfiguration
     from commonroad_rp.utility.evaluation import (
         create_full_solution_trajectory,
         create_planning_problem_solution,
+    )
+    from commonroad_rp.utility.utils_coordinate_system import (
+        create_coordinate_system,
+        create_initial_ref_path,
     )
 
     from splineplan.commonroad import certify_solution
@@ -80,9 +83,11 @@ def _reactive(path: Path) -> dict[str, Any]:
         config = ReactivePlannerConfiguration()
         config.update(scenario=scenario, planning_problem=pp)
         config.planning_problem_set = pps
-        route = RoutePlanner(scenario.lanelet_network, pp).plan_routes().retrieve_first_route()
         planner = ReactivePlanner(config)
-        planner.set_reference_path(route.reference_path)
+        # its coordinate system made with the clcs package's default settings (the
+        # planner's own call passes none, which commonroad-clcs 2025.2 refuses)
+        planner.set_reference_path(coordinate_system=create_coordinate_system(
+            create_initial_ref_path(scenario.lanelet_network, pp)))
         planner.record_state_and_input(planner.x_0)
         last = max(int(getattr(s.time_step, "end", 200)) for s in pp.goal.state_list)
         optimal = None
@@ -99,7 +104,7 @@ def _reactive(path: Path) -> dict[str, Any]:
             assert optimal is not None
             planner.record_state_and_input(optimal[0].state_list[1 + k])
             planner.reset(initial_state_cart=planner.record_state_list[-1],
-                          initial_state_curv=(optimal[2][1 + k], optimal[3][1 + k]),
+                          initial_state_curv=(optimal[1][1 + k], optimal[2][1 + k]),
                           collision_checker=planner.collision_checker,
                           coordinate_system=planner.coordinate_system)
         traj = create_full_solution_trajectory(config, planner.record_state_list)

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from numpy.typing import ArrayLike
+from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import UNBOUNDED, Corridor
 from splineplan.errors import (
@@ -67,6 +67,9 @@ VEHICLE_TYPES = {1: "FORD_ESCORT", 2: "BMW_320i", 3: "VW_VANAGON"}
 #: Time step [s] of the integration that turns the centre path into the car's body
 #: (:func:`ks_states`).
 TOW_STEP = 0.002
+#: Slip angle [rad] at the start above which the path is planned again from the centre's
+#: direction (the body's orientation plus the slip, see :func:`plan`).
+SLIP_REPLAN = 0.02
 #: Lowest speed cap [m/s] tried to meet a goal's time window.
 MIN_CAP = 0.5
 #: Cost function named in the solutions (CommonRoad's ``SM1``: acceleration, jerk, lane
@@ -374,7 +377,7 @@ def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
     of a lane change). With ``passing``, where a static obstacle stands on the lanes of a
     section, the oncoming lane beside them is added (passing space: :func:`plan` asks for
     it when the route's lanes are blocked). Where the chain ends in goal lanelets
-    ``keep_goal``, the vehicle's centre keeps to them over the last section.
+    ``keep_goal``, the vehicle's centre keeps to them (the goal is a lane).
     """
     sections = [_group(network, lid) for lid in route.chain]
     # the reference lane of each section: the previous reference's successor where it is in
@@ -397,7 +400,7 @@ def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
     ends_xy = np.array([r.center_vertices[-1] for r in refs])
     ends = probe.to_sl(ends_xy)[:, 0]
     lo = 0.0
-    for i, (group, ref) in enumerate(zip(sections, refs, strict=True)):
+    for i, group in enumerate(sections):
         hi = float(ends[i]) if i + 1 < len(refs) else float(probe.length)
         hi = max(hi, lo + 1e-3)
         lanes = list(group)
@@ -415,9 +418,10 @@ def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
             order = np.argsort(sl[inside, 0])
             vals = np.interp(probe.s[window], sl[inside, 0][order], sl[inside, 1][order])
             out[window] = pick(out[window], vals)
-        if i + 1 == len(refs) and keep_goal and ref.lanelet_id in keep_goal:
-            kl = _project(probe, ref.left_vertices)
-            kr = _project(probe, ref.right_vertices)
+        own = network.find_lanelet_by_id(route.chain[i])
+        if own.lanelet_id in keep_goal:
+            kl = _project(probe, own.left_vertices)
+            kr = _project(probe, own.right_vertices)
             for sl, arr in ((kl, keep_l), (kr, keep_r)):
                 o = np.argsort(sl[:, 0])
                 arr[window] = np.interp(probe.s[window], sl[o, 0], sl[o, 1])
@@ -556,7 +560,20 @@ class Goal:
 
     @property
     def has_position(self) -> bool:
+        """Whether any goal state has a position."""
         return any(s is not None for s in self.shapes)
+
+    def inside(self, xy: FloatArray) -> NDArray[np.bool_]:
+        """Whether points ``(n, 2)`` [m] lie in a goal position (all, without one)."""
+        import shapely
+
+        if not self.has_position:
+            return np.ones(len(xy), dtype=bool)
+        out = np.zeros(len(xy), dtype=bool)
+        for shape in self.shapes:
+            if shape is not None:
+                out |= shapely.contains_xy(shape, xy[:, 0], xy[:, 1])
+        return out
 
 
 def goal_of(problem: Problem) -> Goal:
@@ -583,14 +600,31 @@ def goal_of(problem: Problem) -> Goal:
             if given:
                 lanelets += [int(x) for x in given]
             else:
+                o = getattr(st, "orientation", None)
                 for p in parts:
-                    lanelets += [int(x) for x in net.find_lanelet_by_shape(p)]
+                    touched = [int(x) for x in net.find_lanelet_by_shape(p)]
+                    heading = [x for x in touched if _heads(net.find_lanelet_by_id(x), p, o)]
+                    lanelets += heading or touched
         v = getattr(st, "velocity", None)
         speeds.append((float(v.start), float(v.end)) if v is not None else None)
         o = getattr(st, "orientation", None)
         orients.append((float(o.start), float(o.end)) if o is not None else None)
     return Goal(tuple(steps), tuple(shapes), tuple(speeds), tuple(orients),
                 tuple(dict.fromkeys(lanelets)))
+
+
+def _heads(lanelet: Any, shape: Any, orientation: Any) -> bool:
+    """Whether the lanelet runs, where it meets the goal's ``shape``, within the goal's
+    ``orientation`` interval (``None``: any), with 0.2 rad to spare."""
+    if orientation is None:
+        return True
+    c = lanelet.center_vertices
+    centre = np.asarray(shape.shapely_object.centroid.coords[0])
+    j = min(int(np.argmin(np.hypot(*(c - centre).T))), len(c) - 2)
+    d = c[j + 1] - c[j]
+    mid = (float(orientation.start) + float(orientation.end)) / 2.0
+    half = (float(orientation.end) - float(orientation.start)) / 2.0 + 0.2
+    return bool(abs(float(wrap_angle(math.atan2(d[1], d[0]) - mid))) <= half)
 
 
 # -- the plan -----------------------------------------------------------------------------
@@ -677,6 +711,23 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
         corridor = route_corridor(net, route, statics, passing=True, keep_goal=goal.lanelets)
         tr = plan_corridor(corridor, obstacles, centre0, head0, roadmap_params=rp, params=tp,
                            start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
+    # a curve from the start: its tangent is the centre's direction, turned from the
+    # body's orientation by the slip angle of the curve's first curvature (the wheels then
+    # start at the curve's angle); the slip that the path planned with it has, by the
+    # secant method
+    tried = [(0.0, _slip(tr, car))]
+    while abs(tried[-1][1] - tried[-1][0]) > SLIP_REPLAN and len(tried) < 3:
+        if len(tried) == 1:
+            beta = tried[0][1]
+        else:
+            (b0, g0), (b1, g1) = tried[-2], tried[-1]
+            slope = (g1 - g0) / (b1 - b0) if b1 != b0 else 0.0
+            beta = b1 + (g1 - b1) / (1.0 - slope) if slope != 1.0 else g1
+        again = plan_corridor(corridor, obstacles, centre0, head0 + beta, roadmap_params=rp,
+                              params=tp, start_speed=min(v0, tp.s_max),
+                              end_speed=end_speed).trajectory
+        tried.append((beta, _slip(again, car)))
+        tr = again
     timing = _Timing(tp, goal, v0, problem.dt, int(init.time_step), t0, end_speed, moving,
                      car)
     tr, sp = timing.best(tr)
@@ -696,7 +747,8 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     yielded = tuple(sp.yielded) if sp is not None else ()
     passed = tuple(sp.passed) if sp is not None else ()
     seconds = time.perf_counter() - t_start
-    states = ks_states(tr, car, problem.dt, int(init.time_step), goal=goal)
+    states = ks_states(tr, car, problem.dt, int(init.time_step), goal=goal,
+                       body0=float(init.orientation))
     reached = bool(pp.goal.is_reached(states[-1]))
     return CommonRoadPlan(problem, car, goal, route, corridor, obstacles, tr, states, reached,
                           yielded, passed, seconds)
@@ -775,14 +827,36 @@ class _Timing:
     def best(self, tr: Trajectory) -> tuple[Trajectory, Any]:
         """The trajectory with the best speed profile, and the space-time speed plan
         (``None`` without moving obstacles). Without a cap that reaches the goal: the
-        fastest."""
+        fastest.
+
+        The cap is found by bisection so that the car is in the middle of the goal region
+        (along its path) in the middle of the time window; a few caps around it and a
+        coarse scan follow if that state misses the goal (its speed or orientation)."""
         limit = speed_limit(tr.s, tr.curvature, self.tp)
+        inside = self.goal.inside(tr.xy)
+        highs = [v[1] for v in self.goal.speed if v is not None]
+        if highs and inside.any():
+            limit = np.where(inside, np.minimum(limit, max(min(highs), MIN_CAP)), limit)
         first = self.timed(tr, limit, np.inf)
-        if _reaches(first[0], self.goal, self.dt, self.step0):
+        if _reaches(first[0], self.goal, self.dt, self.step0, self.car.wheelbase / 2.0):
             return first
-        for cap in np.geomspace(max(self.tp.s_max, MIN_CAP), MIN_CAP, 16):
+        lo_step, hi_step = min(self.goal.steps)
+        target = ((lo_step + min(hi_step, lo_step + 10**6)) / 2.0 - self.step0) * self.dt
+        s_mid = _middle(tr.s, inside) if inside.any() else None
+        caps: list[float] = []
+        if s_mid is not None and _time_at(first[0], s_mid) < target:
+            lo, hi = MIN_CAP, max(self.tp.s_max, MIN_CAP)
+            for _ in range(12):
+                mid = math.sqrt(lo * hi)
+                if _time_at(self.timed(tr, limit, mid)[0], s_mid) > target:
+                    lo = mid
+                else:
+                    hi = mid
+            caps = [hi * f for f in (1.0, 1.03, 0.97, 1.07, 0.93)]
+        caps += list(np.geomspace(max(self.tp.s_max, MIN_CAP), MIN_CAP, 10))
+        for cap in caps:
             cand = self.timed(tr, limit, float(cap))
-            if _reaches(cand[0], self.goal, self.dt, self.step0):
+            if _reaches(cand[0], self.goal, self.dt, self.step0, self.car.wheelbase / 2.0):
                 return cand
         return first
 
@@ -803,34 +877,52 @@ class _Timing:
                       margin=MOVING_MARGIN, end_speed=self.end_speed, v_limit=lim)
 
 
-def _reaches(tr: Trajectory, goal: Goal, dt: float, step0: int) -> bool:
-    steps, xy, head, v = _sampled(tr, dt, step0, None)
+def _middle(s: FloatArray, inside: NDArray[np.bool_]) -> float:
+    """The middle station [m] of the first run of ``inside`` samples."""
+    i = int(np.argmax(inside))
+    j = i
+    while j + 1 < len(inside) and inside[j + 1]:
+        j += 1
+    return float((s[i] + s[j]) / 2.0)
+
+
+def _time_at(tr: Trajectory, station: float) -> float:
+    """Time [s] at which the trajectory first reaches ``station`` [m]."""
+    finite = np.isfinite(tr.t)
+    if not finite.any() or station > tr.s[finite][-1]:
+        return math.inf
+    return float(np.interp(station, tr.s[finite], tr.t[finite]))
+
+
+def _reaches(tr: Trajectory, goal: Goal, dt: float, step0: int, half: float) -> bool:
+    steps, xy, head, v = _sampled(tr, dt, step0, half)
     return bool(goal.reached(steps, xy, head, v).any())
 
 
-def _sampled(tr: Trajectory, dt: float, step0: int, goal: Goal | None
+def _sampled(tr: Trajectory, dt: float, step0: int, half: float
              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """Time steps, centre positions, headings and speeds every ``dt`` [s]; past the end of
-    the trajectory the car stands at its end. With ``goal``: up to the first that reaches it."""
+    """Time steps and, approximately, the body's reference point, heading and speed every
+    ``dt`` [s] (past the end of the trajectory the car stands at its end): the body points
+    from the path half the wheelbase ``half`` [m] behind the centre to the centre (the
+    towed rear axle, :func:`ks_states`); its reference point is taken at the centre
+    (CommonRoad's lies ``b`` ahead of the rear axle, within centimetres of it)."""
     end = tr.t[-1] if np.isfinite(tr.t[-1]) else tr.t[np.isfinite(tr.t)][-1]
     n = int(np.floor(end / dt + 1e-9)) + 1
     t = np.arange(n, dtype=np.float64) * dt
-    x, y, h, v = centre_at(tr, t)
-    steps = step0 + np.arange(n)
+    x, y, _, v, st = centre_at(tr, t)
+    back = np.maximum(st - half, 0.0)
+    rx, ry = np.interp(back, tr.s, tr.x), np.interp(back, tr.s, tr.y)
+    h = np.arctan2(y - ry, x - rx)
+    h = np.where(st - back > 1e-6, h, np.interp(st, tr.s, np.unwrap(tr.heading)))
     xy = np.column_stack((x, y))
-    if goal is not None:
-        hit = np.flatnonzero(goal.reached(steps.astype(float), xy, h, v))
-        if len(hit):
-            k = int(hit[0]) + 1
-            return steps[:k].astype(float), xy[:k], h[:k], v[:k]
-    return steps.astype(float), xy, h, v
+    return (step0 + np.arange(n)).astype(float), xy, h, v
 
 
 def centre_at(tr: Trajectory, t: FloatArray) -> tuple[FloatArray, ...]:
-    """The centre's x, y [m], path heading [rad] and speed [m/s] at times ``t`` [s] from
-    the trajectory's start: the speed changes at constant acceleration between samples (as
-    the profile was made), so that positions and speeds agree at any speed, and the pose
-    follows the arc length."""
+    """The centre's x, y [m], path heading [rad], speed [m/s] and station [m] at times
+    ``t`` [s] from the trajectory's start: the speed changes at constant acceleration
+    between samples (as the profile was made), so that positions and speeds agree at any
+    speed, and the pose follows the arc length."""
     finite = np.isfinite(tr.t)
     tt, ss, vv = tr.t[finite], tr.s[finite], tr.speed[finite]
     if len(tt) < 2:
@@ -847,13 +939,14 @@ def centre_at(tr: Trajectory, t: FloatArray) -> tuple[FloatArray, ...]:
     s = np.where(t > tt[-1], ss[-1] + (t - tt[-1]) * vv[-1], s)
     s = np.minimum(s, tr.s[-1])
     head = np.interp(s, tr.s, np.unwrap(tr.heading))
-    return np.interp(s, tr.s, tr.x), np.interp(s, tr.s, tr.y), head, v
+    return np.interp(s, tr.s, tr.x), np.interp(s, tr.s, tr.y), head, v, s
 
 
 def ks_states(tr: Trajectory, car: Vehicle, dt: float, step0: int = 0, *,
-              goal: Goal | None = None) -> list[Any]:
+              goal: Goal | None = None, body0: float | None = None) -> list[Any]:
     """The trajectory every ``dt`` [s] as CommonRoad's KS states (time steps from
-    ``step0``), up to the first that reaches ``goal`` where given.
+    ``step0``), up to the first that reaches ``goal`` where given; the body starts at
+    orientation ``body0`` [rad] (default: along the path).
 
     The car's body follows from its centre's path as a kinematic single-track car's does:
     the rear axle, half the wheelbase behind the centre, is towed without slipping
@@ -865,13 +958,15 @@ def ks_states(tr: Trajectory, car: Vehicle, dt: float, step0: int = 0, *,
     _require()
     from commonroad.scenario.state import KSState
 
-    steps, _, _, _ = _sampled(tr, dt, step0, goal)
-    n = len(steps)
+    end = tr.t[-1] if np.isfinite(tr.t[-1]) else tr.t[np.isfinite(tr.t)][-1]
+    n = int(np.floor(end / dt + 1e-9)) + 1
     sub = max(round(dt / TOW_STEP), 1)
     t = np.arange((n - 1) * sub + 1, dtype=np.float64) * (dt / sub)
-    x, y, head, v = centre_at(tr, t)
+    x, y, head, v, _ = centre_at(tr, t)
     vx, vy = v * np.cos(head), v * np.sin(head)
-    theta = _tow(t, vx, vy, float(head[0]), car.wheelbase / 2.0)
+    if body0 is None:
+        body0 = float(head[0])
+    theta = _tow(t, vx, vy, body0, car.wheelbase / 2.0)
     rate = np.gradient(theta, t) if len(t) > 1 else np.zeros(1)
     v_rear = vx * np.cos(theta) + vy * np.sin(theta)
     wheel = np.arctan2(car.wheelbase * rate, np.maximum(v_rear, 1e-3))
@@ -880,9 +975,20 @@ def ks_states(tr: Trajectory, car: Vehicle, dt: float, step0: int = 0, *,
                             y - car.wheelbase / 2 * np.sin(theta)))
     cog = rear + car.b * np.column_stack((np.cos(theta), np.sin(theta)))
     keep = np.arange(0, len(t), sub)
+    if goal is not None:
+        hit = np.flatnonzero(goal.reached((step0 + np.arange(len(keep))).astype(float),
+                                          cog[keep], theta[keep], v_rear[keep]))
+        if len(hit):
+            keep = keep[:int(hit[0]) + 1]
     return [KSState(position=cog[i], orientation=float(theta[i]),
                     velocity=float(max(v_rear[i], 0.0)), steering_angle=float(wheel[i]),
                     time_step=int(step0 + k)) for k, i in enumerate(keep)]
+
+
+def _slip(tr: Trajectory, car: Vehicle) -> float:
+    """Slip angle [rad] of the centre's path against the body at the trajectory's start
+    (``sin beta = kappa L / 2``)."""
+    return math.asin(float(np.clip(tr.curvature[0] * car.wheelbase / 2.0, -1.0, 1.0)))
 
 
 def _tow(t: FloatArray, vx: FloatArray, vy: FloatArray, theta0: float, half: float
