@@ -369,16 +369,20 @@ def _oncoming(network: Any, leftmost: Any) -> Any | None:
 
 
 def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
-                   passing: bool = False, keep_goal: Sequence[int] = ()) -> Corridor:
+                   passing: bool = False, keep_lanes: bool = True) -> Corridor:
     """The corridor along ``route.chain``: each lanelet with its same-direction neighbours.
 
     The reference line is the chain's lanes joined, where possible each section's lane
     the successor of the previous one (so that it stays in one lane across the sections
     of a lane change). With ``passing``, where a static obstacle stands on the lanes of a
     section, the oncoming lane beside them is added (passing space: :func:`plan` asks for
-    it when the route's lanes are blocked). Where the chain ends in goal lanelets
-    ``keep_goal``, the vehicle's centre keeps to them (the goal is a lane).
+    it when the route's lanes are blocked). With ``keep_lanes``, the vehicle's centre
+    keeps to the route's own lanelets in each section (both lanes of a lane change; the
+    corridor's keep offsets): level 2 plans among static obstacles only, and its widest
+    path would otherwise take the middle of a multi-lane road, across the lane of the
+    traffic beside; where those lanes are blocked, level 2 uses the whole road.
     """
+    on_route = set(route.lanelets)
     sections = [_group(network, lid) for lid in route.chain]
     # the reference lane of each section: the previous reference's successor where it is in
     # the section, else the chain's lanelet
@@ -418,13 +422,16 @@ def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
             order = np.argsort(sl[inside, 0])
             vals = np.interp(probe.s[window], sl[inside, 0][order], sl[inside, 1][order])
             out[window] = pick(out[window], vals)
-        own = network.find_lanelet_by_id(route.chain[i])
-        if own.lanelet_id in keep_goal:
-            kl = _project(probe, own.left_vertices)
-            kr = _project(probe, own.right_vertices)
-            for sl, arr in ((kl, keep_l), (kr, keep_r)):
+        if keep_lanes:
+            mine = [g for g in group if g.lanelet_id in on_route] or [
+                network.find_lanelet_by_id(route.chain[i])]
+            for line, arr, pick in ((mine[0].left_vertices, keep_l, np.maximum),
+                                    (mine[-1].right_vertices, keep_r, np.minimum)):
+                sl = _project(probe, line)
                 o = np.argsort(sl[:, 0])
-                arr[window] = np.interp(probe.s[window], sl[o, 0], sl[o, 1])
+                vals = np.interp(probe.s[window], sl[o, 0], sl[o, 1])
+                arr[window] = np.where(np.abs(arr[window]) >= UNBOUNDED, vals,
+                                       pick(arr[window], vals))
         lo = hi
     bad = ~np.isfinite(left) | ~np.isfinite(right)
     if bad.all():
@@ -435,7 +442,7 @@ def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
     right = np.interp(idx, idx[good], right[good])
     right = np.minimum(right, left - 0.5)
     keeps = (None, None)
-    if keep_goal and np.any(keep_l < UNBOUNDED):
+    if keep_lanes and np.any(keep_l < UNBOUNDED):
         keeps = (np.minimum(keep_l, left), np.maximum(keep_r, right))
     ids = tuple(str(lid) for lid in route.chain)
     return Corridor(probe.reference, probe.s, left, right, ids, _section_starts(ends),
@@ -691,13 +698,16 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     horizon = max(hi for _, hi in goal.steps) if goal.steps else 0
     horizon = min(horizon, int(60.0 / problem.dt)) if horizon < 10**9 else int(20 / problem.dt)
     if goal.lanelets:
-        route = lanelet_route(net, start_ids, goal.lanelets)
+        try:
+            route = lanelet_route(net, start_ids, goal.lanelets)
+        except NoRouteError as err:
+            raise NoRouteError(f"{problem.source}: {err}") from err
         route = _run_on(net, route)
     else:
         route = follow_road(net, start_ids[0], s_top * horizon * problem.dt + 50.0)
     statics = static_obstacles(sc)
     tp = car.trajectory_params(max(s_top, 1.0))
-    corridor = route_corridor(net, route, statics, keep_goal=goal.lanelets)
+    corridor = route_corridor(net, route, statics)
     moving = _moving(sc)
     road_ends = not any(net.find_lanelet_by_id(route.chain[-1]).successor)
     end_speed = 0.0 if road_ends else None
@@ -708,7 +718,7 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
                            start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
     except RoadBlockedError:
         # the route's lanes are blocked: the oncoming lane beside them is passing space
-        corridor = route_corridor(net, route, statics, passing=True, keep_goal=goal.lanelets)
+        corridor = route_corridor(net, route, statics, passing=True)
         tr = plan_corridor(corridor, obstacles, centre0, head0, roadmap_params=rp, params=tp,
                            start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
     # a curve from the start: its tangent is the centre's direction, turned from the
@@ -838,34 +848,38 @@ class _Timing:
         if highs and inside.any():
             limit = np.where(inside, np.minimum(limit, max(min(highs), MIN_CAP)), limit)
         first = self.timed(tr, limit, np.inf)
-        if _reaches(first[0], self.goal, self.dt, self.step0, self.car.wheelbase / 2.0):
+        half = self.car.wheelbase / 2.0
+        if not self.goal.steps or _reaches(first[0], self.goal, self.dt, self.step0, half):
             return first
         lo_step, hi_step = min(self.goal.steps)
         target = ((lo_step + min(hi_step, lo_step + 10**6)) / 2.0 - self.step0) * self.dt
         s_mid = _middle(tr.s, inside) if inside.any() else None
         caps: list[float] = []
         if s_mid is not None and _time_at(first[0], s_mid) < target:
+            # bisection on the profile without the moving obstacles (they only slow it)
             lo, hi = MIN_CAP, max(self.tp.s_max, MIN_CAP)
             for _ in range(12):
                 mid = math.sqrt(lo * hi)
-                if _time_at(self.timed(tr, limit, mid)[0], s_mid) > target:
+                if _time_at(self.timed(tr, limit, mid, alone=True)[0], s_mid) > target:
                     lo = mid
                 else:
                     hi = mid
-            caps = [hi * f for f in (1.0, 1.03, 0.97, 1.07, 0.93)]
-        caps += list(np.geomspace(max(self.tp.s_max, MIN_CAP), MIN_CAP, 10))
+            caps = [hi * f for f in (1.0, 1.04, 0.96, 1.1, 0.9)]
+        caps += list(np.geomspace(max(self.tp.s_max, MIN_CAP), MIN_CAP, 6 if self.moving
+                                  else 10))
         for cap in caps:
             cand = self.timed(tr, limit, float(cap))
-            if _reaches(cand[0], self.goal, self.dt, self.step0, self.car.wheelbase / 2.0):
+            if _reaches(cand[0], self.goal, self.dt, self.step0, half):
                 return cand
         return first
 
-    def timed(self, tr: Trajectory, limit: FloatArray, cap: float) -> tuple[Trajectory, Any]:
+    def timed(self, tr: Trajectory, limit: FloatArray, cap: float, *, alone: bool = False
+              ) -> tuple[Trajectory, Any]:
         """The path with its speed under ``cap`` [m/s]; the cap applies from where braking
-        from the start's speed reaches it."""
+        from the start's speed reaches it. ``alone``: without the moving obstacles."""
         brake = np.sqrt(np.maximum(self.v0**2 - 2.0 * self.tp.b_max * tr.s, 0.0))
         lim = np.minimum(limit, np.maximum(cap, brake))
-        if not self.moving:
+        if alone or not self.moving:
             v = speed_profile(tr.s, lim, a_max=self.tp.a_max, b_max=self.tp.b_max,
                               start_speed=min(self.v0, float(lim[0])),
                               end_speed=self.end_speed)

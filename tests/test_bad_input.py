@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -48,8 +49,15 @@ start_edge = "e0"
 goal_edge = "e2"
 """
 
+CR_DATA = ROOT / "tests" / "data" / "commonroad"
+CR_URBAN = str(CR_DATA / "ZAM_Urban-3_1.xml")
+#: A bundled CommonRoad scenario with its planning problems taken out.
+CR_NO_PROBLEM = re.sub(r"<planningProblem .*?</planningProblem>", "",
+                       (CR_DATA / "ZAM_Urban-3_1.xml").read_text(), flags=re.S)
+
 #: Files each case may name as ``{tmp}/<name>``.
 FILES = {
+    "noproblem.cr.xml": CR_NO_PROBLEM,
     "afile": "just a file\n",
     "bad.xml": "this is not XML\n",
     "notimage.png": "not an image either\n",
@@ -233,6 +241,19 @@ CLI_CASES: list[tuple[list[str], str]] = [
     (["bench", "--drivers", "robot", "--out", "{out}"], "--drivers: invalid choice: 'robot'"),
     (["bench", "--out", "{tmp}/afile"], "--out {tmp}/afile is a file"),
     (["bench", "nosuite", "--out", "{out}"], "unknown suite 'nosuite'"),
+    # commonroad (checked before any planning)
+    (["commonroad", "{tmp}/none.xml", "--out", "{out}"], "scenario file not found"),
+    (["commonroad", STRAIGHT, "--out", "{out}"],
+     "straight.net.xml is not a CommonRoad scenario (no <commonRoad> root element)"),
+    (["commonroad", "{tmp}/noproblem.cr.xml", "--out", "{out}"],
+     "noproblem.cr.xml holds no planning problem: nothing to solve"),
+    (["commonroad", str(CR_DATA / "DEU_Muc-2_1_T-1.xml"), "--out", "{out}"],
+     "DEU_Muc-2_1_T-1.xml: no lanelet route from lanelet 34782 to goal lanelet 34784"),
+    (["commonroad", CR_URBAN, "--out", "{out}", "--vehicle-type", "7"],
+     "unknown vehicle type 7; CommonRoad's are 1 (FORD_ESCORT), 2 (BMW_320i), 3 (VW_VANAGON)"),
+    (["commonroad", CR_URBAN, "--out", "{out}", "--planning-problem", "5"],
+     "ZAM_Urban-3_1.xml has no planning problem 5 (it has 11)"),
+    (["commonroad", CR_URBAN, "--out", "{tmp}/afile"], "--out {tmp}/afile is a file"),
 ]
 
 
