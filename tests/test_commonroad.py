@@ -28,7 +28,7 @@ DATA = ROOT / "tests" / "data" / "commonroad"
 def solved() -> dict[str, cr.CommonRoadPlan]:
     """Each bundled scenario that has a solution, solved once for the module."""
     out = {}
-    for name in ("ZAM_Urban-3_1", "ZAM_Urban-2_1", "USA_US101-7_2_T-1", "USA_Lanker-1_16_T-1",
+    for name in ("ZAM_Urban-3_1", "ZAM_Urban-2_1", "USA_US101-16_1_T-1", "USA_Lanker-1_16_T-1",
                  "RUS_Bicycle-11_1_T-1"):
         out[name] = cr.plan(cr.read(DATA / f"{name}.xml"))
     return out
@@ -47,7 +47,7 @@ def _strictly_feasible(res: cr.CommonRoadPlan) -> bool:
     return bool(ok)
 
 
-@pytest.mark.parametrize("name", ["ZAM_Urban-3_1", "ZAM_Urban-2_1", "USA_US101-7_2_T-1",
+@pytest.mark.parametrize("name", ["ZAM_Urban-3_1", "ZAM_Urban-2_1", "USA_US101-16_1_T-1",
                                   "USA_Lanker-1_16_T-1", "RUS_Bicycle-11_1_T-1"])
 def test_solutions_pass_the_drivability_checker(solved: dict[str, cr.CommonRoadPlan],
                                                 name: str) -> None:
@@ -86,7 +86,7 @@ def test_static_obstacles_are_passed_with_room(solved: dict[str, cr.CommonRoadPl
 def test_a_lane_change_and_an_intersection_turn(solved: dict[str, cr.CommonRoadPlan]) -> None:
     """Level 1 on the lanelet graph: the freeway's goal is in the next lane (a lane
     change), the Lankershim goal beyond a turn at an intersection."""
-    lane = solved["USA_US101-7_2_T-1"]
+    lane = solved["USA_US101-16_1_T-1"]
     assert lane.route.lane_changes >= 1
     net = lane.problem.scenario.lanelet_network
     first = net.find_lanelet_by_id(lane.route.lanelets[0])
