@@ -29,6 +29,7 @@ the package works without the extra; without it they raise one clear error.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import logging
 import math
@@ -251,6 +252,57 @@ class LaneletRoute:
     lane_changes: int
 
 
+@dataclass(frozen=True)
+class _Side:
+    """A lanelet's neighbour on one side: its id (``None``: none) and whether it runs the
+    same way."""
+
+    id: int | None
+    same: bool
+
+
+#: Distance [m] within which a boundary's ends meet another lanelet's boundary's ends for
+#: the two to count as neighbours where the scenario links none.
+SHARED_BOUNDARY = 0.3
+
+
+def _neighbours(network: Any) -> dict[int, tuple[_Side, _Side]]:
+    """Each lanelet's left and right neighbour: as the scenario links them, and where it
+    links none, the lanelet whose boundary has the same ends (some recorded scenarios
+    leave parallel lanes unlinked)."""
+    cached = getattr(network, "_splineplan_neighbours", None)
+    if cached is not None:
+        return cached  # type: ignore[no-any-return]
+    lls = list(network.lanelets)
+    ends = {ll.lanelet_id: (ll.left_vertices[[0, -1]], ll.right_vertices[[0, -1]])
+            for ll in lls}
+    out: dict[int, tuple[_Side, _Side]] = {}
+    for ll in lls:
+        sides = []
+        for adj, same, mine, k in ((ll.adj_left, ll.adj_left_same_direction, 0, 1),
+                                   (ll.adj_right, ll.adj_right_same_direction, 1, 0)):
+            if adj is not None:
+                sides.append(_Side(int(adj), bool(same)))
+                continue
+            here = ends[ll.lanelet_id][mine]
+            found = _Side(None, True)
+            for other in lls:
+                if other is ll:
+                    continue
+                theirs = ends[other.lanelet_id]
+                if np.all(np.hypot(*(here - theirs[k]).T) < SHARED_BOUNDARY):
+                    found = _Side(int(other.lanelet_id), True)
+                    break
+                if np.all(np.hypot(*(here - theirs[mine][::-1]).T) < SHARED_BOUNDARY):
+                    found = _Side(int(other.lanelet_id), False)
+                    break
+            sides.append(found)
+        out[ll.lanelet_id] = (sides[0], sides[1])
+    with contextlib.suppress(AttributeError):  # a network that takes no attributes
+        network._splineplan_neighbours = out
+    return out
+
+
 def _lanelet_graph(network: Any) -> tuple[list[int], dict[int, int], list[list[tuple[int, float]]]]:
     """Lanelet ids, their indices, and the arcs ``(to, cost)`` of each (see the module
     docstring)."""
@@ -263,10 +315,9 @@ def _lanelet_graph(network: Any) -> tuple[list[int], dict[int, int], list[list[t
         for nxt in ll.successor:
             if nxt in index:
                 adjacency[i].append((index[nxt], length))
-        for adj, same in ((ll.adj_left, ll.adj_left_same_direction),
-                          (ll.adj_right, ll.adj_right_same_direction)):
-            if adj is not None and same and adj in index:
-                adjacency[i].append((index[adj], LANE_CHANGE_COST))
+        for side in _neighbours(network)[ll.lanelet_id]:
+            if side.id is not None and side.same and side.id in index:
+                adjacency[i].append((index[side.id], LANE_CHANGE_COST))
     return ids, index, adjacency
 
 
@@ -308,9 +359,7 @@ def _route_of(network: Any, lanelets: list[int]) -> LaneletRoute:
 
 
 def _same_direction_neighbour(network: Any, a: int, b: int) -> bool:
-    ll = network.find_lanelet_by_id(a)
-    return bool((ll.adj_left == b and ll.adj_left_same_direction)
-                or (ll.adj_right == b and ll.adj_right_same_direction))
+    return any(side.id == b and side.same for side in _neighbours(network)[a])
 
 
 def follow_road(network: Any, start: int, length: float) -> LaneletRoute:
@@ -346,15 +395,16 @@ def _group(network: Any, lid: int) -> list[Any]:
     ll = network.find_lanelet_by_id(lid)
     left: list[Any] = []
     cur = ll
-    while cur.adj_left is not None and cur.adj_left_same_direction:
-        cur = network.find_lanelet_by_id(cur.adj_left)
+    sides = _neighbours(network)
+    while sides[cur.lanelet_id][0].id is not None and sides[cur.lanelet_id][0].same:
+        cur = network.find_lanelet_by_id(sides[cur.lanelet_id][0].id)
         if cur in left or cur is ll:
             break
         left.append(cur)
     right: list[Any] = []
     cur = ll
-    while cur.adj_right is not None and cur.adj_right_same_direction:
-        cur = network.find_lanelet_by_id(cur.adj_right)
+    while sides[cur.lanelet_id][1].id is not None and sides[cur.lanelet_id][1].same:
+        cur = network.find_lanelet_by_id(sides[cur.lanelet_id][1].id)
         if cur in right or cur is ll:
             break
         right.append(cur)
@@ -363,8 +413,9 @@ def _group(network: Any, lid: int) -> list[Any]:
 
 def _oncoming(network: Any, leftmost: Any) -> Any | None:
     """The oncoming lanelet beside a group's leftmost lanelet, if any."""
-    if leftmost.adj_left is not None and not leftmost.adj_left_same_direction:
-        return network.find_lanelet_by_id(leftmost.adj_left)
+    side = _neighbours(network)[leftmost.lanelet_id][0]
+    if side.id is not None and not side.same:
+        return network.find_lanelet_by_id(side.id)
     return None
 
 
@@ -744,7 +795,10 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     for _ in range(2):  # speed first; the path around a conflict speed cannot resolve
         if sp is None or sp.conflict is None:
             break
-        more = obstacles + sp.conflict.as_static()
+        swept = sp.conflict.as_static()
+        if swept.near_mask(centre0[None], car.length).any():
+            break  # it reaches the car where it stands: no path can start clear of it
+        more = obstacles + swept
         try:
             again = plan_corridor(corridor, more, centre0, head0, roadmap_params=rp, params=tp,
                                   start_speed=min(v0, tp.s_max),

@@ -55,8 +55,13 @@ CR_URBAN = str(CR_DATA / "ZAM_Urban-3_1.xml")
 CR_NO_PROBLEM = re.sub(r"<planningProblem .*?</planningProblem>", "",
                        (CR_DATA / "ZAM_Urban-3_1.xml").read_text(), flags=re.S)
 
+#: A bundled CommonRoad scenario whose goal lanelet lies behind the start (on no route).
+CR_BEHIND = re.sub(r'<lanelet ref="3604"/>\s*<lanelet ref="3487"/>', '<lanelet ref="3450"/>',
+                   (CR_DATA / "USA_Lanker-1_16_T-1.xml").read_text())
+
 #: Files each case may name as ``{tmp}/<name>``.
 FILES = {
+    "behind.cr.xml": CR_BEHIND,
     "noproblem.cr.xml": CR_NO_PROBLEM,
     "afile": "just a file\n",
     "bad.xml": "this is not XML\n",
@@ -247,8 +252,8 @@ CLI_CASES: list[tuple[list[str], str]] = [
      "straight.net.xml is not a CommonRoad scenario (no <commonRoad> root element)"),
     (["commonroad", "{tmp}/noproblem.cr.xml", "--out", "{out}"],
      "noproblem.cr.xml holds no planning problem: nothing to solve"),
-    (["commonroad", str(CR_DATA / "DEU_Muc-2_1_T-1.xml"), "--out", "{out}"],
-     "DEU_Muc-2_1_T-1.xml: no lanelet route from lanelet 34782 to goal lanelet 34784"),
+    (["commonroad", "{tmp}/behind.cr.xml", "--out", "{out}"],
+     "behind.cr.xml: no lanelet route from lanelet 3604 to goal lanelet 3450"),
     (["commonroad", CR_URBAN, "--out", "{out}", "--vehicle-type", "7"],
      "unknown vehicle type 7; CommonRoad's are 1 (FORD_ESCORT), 2 (BMW_320i), 3 (VW_VANAGON)"),
     (["commonroad", CR_URBAN, "--out", "{out}", "--planning-problem", "5"],
