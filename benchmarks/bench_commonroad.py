@@ -8,10 +8,11 @@ history, and a seeded sample of the others there. Each is solved by
 - splineplan (:func:`splineplan.commonroad.plan`, BMW 320i): one plan from the initial
   state to the goal; its time is the plan's (levels 1-3, the speed plan among the dynamic
   obstacles, the goal timing);
-- the reactive planner (``commonroad-reactive-planner``, its default configuration, the
-  route planner's shortest reference path), replanning every third step as its own
-  example script does, until the goal is reached, it finds no trajectory, or the goal's
-  last time step passes; its time per cycle is that of ``ReactivePlanner.plan``.
+- the reactive planner (``commonroad-reactive-planner``, its default configuration but in
+  one process, see :func:`_reactive`; the route planner's shortest reference path),
+  replanning every third step as its own example script does, until the goal is reached,
+  it finds no trajectory, the goal's last time step passes, or its planning time runs
+  over ``--peer-budget``; its time per cycle is that of ``ReactivePlanner.plan``.
 
 Both solutions are judged by the same checks (:func:`splineplan.commonroad.certify_solution`:
 collisions with every obstacle at its time, the road boundary, ``trajectory_feasibility``
@@ -107,6 +108,10 @@ def _reactive(path: Path, budget: float) -> dict[str, Any]:
     t_start = time.perf_counter()
     try:
         config = ReactivePlannerConfiguration()
+        # one process: with its default worker processes, a worker that raises (a sample
+        # outside its curvilinear frame) leaves the planner waiting for it forever, and two
+        # cores shared with six workers measure nothing
+        config.debug.multiproc = False
         config.update(scenario=scenario, planning_problem=pp)
         config.planning_problem_set = pps
         planner = ReactivePlanner(config)
