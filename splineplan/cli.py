@@ -553,6 +553,61 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     return exit_status(res.rows)
 
 
+def _add_commonroad(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "commonroad", help="solve a CommonRoad scenario's planning problem",
+        description="Read a CommonRoad scenario, plan its planning problem (lanelet route, "
+                    "corridor, trajectory timed for the goal, among its static and dynamic "
+                    "obstacles) for CommonRoad's kinematic single-track car, and write the "
+                    "solution in CommonRoad's solution format into --out (and a picture with "
+                    "--plot). Exit status 0 when the solution reaches the goal, 1 when not.")
+    p.add_argument("scenario", metavar="SCENARIO.xml", help="CommonRoad scenario file")
+    p.add_argument("--out", metavar="DIR", default="commonroad_out",
+                   help="output folder (commonroad_out)")
+    p.add_argument("--plot", action="store_true",
+                   help="also draw the scenario and the trajectory (<scenario id>.png)")
+    p.add_argument("--vehicle-type", type=_int_in(0), default=2, metavar="N",
+                   help="CommonRoad vehicle type: 1 Ford Escort, 2 BMW 320i, 3 VW Vanagon (2)")
+    p.add_argument("--planning-problem", type=_int_in(0), default=None, metavar="ID",
+                   help="which planning problem (default: the first)")
+    p.set_defaults(func=_cmd_commonroad)
+
+
+def _cmd_commonroad(args: argparse.Namespace) -> int:
+    from splineplan import commonroad as cr
+
+    out = _out_dir(args.out)
+    car = cr.vehicle(args.vehicle_type)  # an unknown type is refused before any work
+    problem = cr.read(args.scenario, planning_problem_id=args.planning_problem)
+    res = cr.plan(problem, vehicle_type=car.type_id)
+    written = cr.write_solution(res, out)
+    name = str(problem.scenario.scenario_id)
+    if args.plot:
+        from splineplan.plot import plot_commonroad
+
+        net = problem.scenario.lanelet_network
+        picture = out / f"{name}.png"
+        plot_commonroad(
+            cr.lanelet_polygons(problem.scenario), res.obstacles, cr.driven(res),
+            route=[cr.lanelet_outline(net.find_lanelet_by_id(i)) for i in res.route.lanelets],
+            goal=cr.goal_outlines(res.goal), moving=cr.moving_paths(problem.scenario),
+            body=(car.length, car.width), s_max=res.trajectory.speed.max(),
+            title=f"{problem.scenario.scenario_id}: goal "
+                  + ("reached" if res.goal_reached else "NOT reached"),
+            path=picture)
+    last = res.states[-1]
+    print(f"route: lanelets {' '.join(map(str, res.route.lanelets))} ({res.route.length:.1f} m, "
+          f"{res.route.lane_changes} lane change(s))")
+    print(f"trajectory: {len(res.states)} states to time step {last.time_step}, "
+          f"{res.trajectory.length:.1f} m planned; goal reached: "
+          f"{'yes' if res.goal_reached else 'no'}"
+          + (f"; waits for {', '.join(res.yielded)}" if res.yielded else ""))
+    print(f"vehicle: KS model, type {car.type_id} ({car.name}); plan time "
+          f"{1e3 * res.plan_seconds:.1f} ms")
+    print(f"written to {written}" + (f" and {out / (name + '.png')}" if args.plot else ""))
+    return 0 if res.goal_reached else 1
+
+
 # ---- end of commands --------------------------------------------------------------------
 
 
@@ -611,7 +666,7 @@ def _registry() -> dict[str, Callable[[argparse._SubParsersAction], None]]:
 
 
 #: Commands that run the planner (the first use of an install compiles its inner loops).
-_PLANNING = ("plan", "plan-image", "simulate", "bench")
+_PLANNING = ("plan", "plan-image", "simulate", "bench", "commonroad")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1169,3 +1169,80 @@ def _bench_travel_time(rows: Sequence[Mapping[str, Any]], drivers: list[str],
     ax.figure.legend([h for h, _ in proxies], [lab for _, lab in proxies],
                      loc="outside right upper", fontsize="small")
     return ax
+
+
+def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: Any, *,
+                    route: Sequence[Any] = (), goal: Sequence[Any] = (),
+                    moving: Sequence[Any] = (), body: tuple[float, float] = (4.5, 1.8),
+                    s_max: float | None = None, title: str | None = None,
+                    path: str | PathLike[str] | None = None) -> Any:
+    """A CommonRoad scenario with the planned trajectory.
+
+    Parameters
+    ----------
+    lanelets, route
+        Outlines ``(k, 2)`` [m] of every lanelet, and of the route's lanelets (shaded).
+    obstacles
+        The static obstacles (and the places planned around moving ones).
+    trajectory
+        The plan (``x, y, heading, speed, s``), drawn coloured by speed with the car's
+        ``body`` (length, width [m]) every 0.5 s.
+    goal
+        Outlines ``(k, 2)`` of the goal region's positions.
+    moving
+        Each moving obstacle's centre path ``(n, 2)`` [m] (thin grey lines, its start a dot).
+    """
+    fig, ax = plt.subplots(figsize=(10, 6), layout="constrained")
+    ax.add_collection(PolyCollection([np.asarray(p) for p in lanelets], facecolors="0.92",
+                                     edgecolors="0.7", linewidths=0.5, zorder=1))
+    if len(route):
+        ax.add_collection(PolyCollection([np.asarray(p) for p in route], facecolors="#cfe3f5",
+                                         edgecolors="none", zorder=1.5,
+                                         label="route (level 1)"))
+    if len(goal):
+        ax.add_collection(PolyCollection([np.asarray(p) for p in goal], facecolors="#b9e4b0",
+                                         edgecolors="#3b8a2e", linewidths=1.0, alpha=0.7,
+                                         zorder=2, label="goal region"))
+    if len(obstacles):
+        ax.add_collection(PolyCollection(obstacles.polygons(), facecolors="0.35",
+                                         edgecolors="k", zorder=3, label="static obstacles"))
+    for k, m in enumerate(moving):
+        xy = np.asarray(m)
+        ax.plot(xy[:, 0], xy[:, 1], color="0.55", lw=0.8, zorder=2.5,
+                label="dynamic obstacles' paths" if k == 0 else None)
+        ax.plot(xy[:1, 0], xy[:1, 1], "o", color="0.55", ms=3, zorder=2.5)
+    xy = np.column_stack((trajectory.x, trajectory.y))
+    top = _speed_scale(s_max, trajectory.speed)
+    ax.add_collection(_speed_line(xy, trajectory.speed, top, lw=2.0, gid="trajectory",
+                                  zorder=5, label="trajectory (colour: speed)"))
+    t = np.asarray(trajectory.t, dtype=float)
+    finite = np.isfinite(t)
+    if finite.sum() >= 2:
+        at = np.arange(0.0, t[finite][-1] + 1e-9, 0.5)
+        s_at = np.interp(at, t[finite], np.asarray(trajectory.s)[finite])
+        from splineplan.geometry import box_corners
+
+        hx = np.interp(s_at, trajectory.s, trajectory.x)
+        hy = np.interp(s_at, trajectory.s, trajectory.y)
+        hh = np.interp(s_at, trajectory.s, np.unwrap(trajectory.heading))
+        cars = box_corners(np.column_stack((hx, hy)), hh, np.full(len(at), body[0]),
+                           np.full(len(at), body[1]))
+        ax.add_collection(PolyCollection(list(cars), facecolors="none", edgecolors="#1f4e9c",
+                                         linewidths=0.5, zorder=4,
+                                         label="car every 0.5 s"))
+    fig.colorbar(plt.cm.ScalarMappable(norm=Normalize(0.0, top), cmap=SPEED_CMAP), ax=ax,
+                 label="speed [m/s]", shrink=0.8)
+    pts = np.vstack([xy] + [np.asarray(p) for p in route] + [np.asarray(p) for p in goal])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = max(10.0, 0.1 * float(np.max(hi - lo)))
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal", adjustable="box")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    if title:
+        ax.set_title(title)
+    ax.legend(loc="best", fontsize="small")
+    if path is not None:
+        _save(ax, path)
+    return fig

@@ -489,12 +489,17 @@ def _plan_stations(t: FloatArray, s: FloatArray, times: FloatArray) -> FloatArra
 # ---- trajectories ----------------------------------------------------------------------------
 def retime(trajectory: Trajectory, moving: Sequence[MovingObstacle], params: TrajectoryParams,
            *, t0: float, length: float, width: float, margin: float,
-           end_speed: float | None = None) -> tuple[Trajectory, SpeedPlan]:
+           end_speed: float | None = None, v_limit: FloatArray | None = None
+           ) -> tuple[Trajectory, SpeedPlan]:
     """The same path with the speed of :func:`speed_among`, from the trajectory's start
-    speed to at most ``end_speed`` (default: its own end speed). The result's times are
-    from ``t0`` like the trajectory's own (from 0); a wait is two samples at one station."""
+    speed to at most ``end_speed`` (default: its own end speed). ``v_limit`` ``(n,)`` [m/s]
+    at the trajectory's samples lowers the path's own speed limit (a cap that times the
+    arrival at a goal). The result's times are from ``t0`` like the trajectory's own (from
+    0); a wait is two samples at one station."""
     tr = trajectory
     lim = speed_limit(tr.s, tr.curvature, params)
+    if v_limit is not None:
+        lim = np.minimum(lim, v_limit)
     plan = speed_among(tr.s, tr.xy, tr.heading, lim, t0=t0, v0=float(tr.speed[0]),
                        moving=moving, length=length, width=width, margin=margin,
                        a_max=params.a_max, d_max=params.b_max,

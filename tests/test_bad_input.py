@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 import math
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -48,8 +49,20 @@ start_edge = "e0"
 goal_edge = "e2"
 """
 
+CR_DATA = ROOT / "tests" / "data" / "commonroad"
+CR_URBAN = str(CR_DATA / "ZAM_Urban-3_1.xml")
+#: A bundled CommonRoad scenario with its planning problems taken out.
+CR_NO_PROBLEM = re.sub(r"<planningProblem .*?</planningProblem>", "",
+                       (CR_DATA / "ZAM_Urban-3_1.xml").read_text(), flags=re.S)
+
+#: A bundled CommonRoad scenario whose goal lanelet lies behind the start (on no route).
+CR_BEHIND = re.sub(r'<lanelet ref="3604"/>\s*<lanelet ref="3487"/>', '<lanelet ref="3450"/>',
+                   (CR_DATA / "USA_Lanker-1_16_T-1.xml").read_text())
+
 #: Files each case may name as ``{tmp}/<name>``.
 FILES = {
+    "behind.cr.xml": CR_BEHIND,
+    "noproblem.cr.xml": CR_NO_PROBLEM,
     "afile": "just a file\n",
     "bad.xml": "this is not XML\n",
     "notimage.png": "not an image either\n",
@@ -233,6 +246,19 @@ CLI_CASES: list[tuple[list[str], str]] = [
     (["bench", "--drivers", "robot", "--out", "{out}"], "--drivers: invalid choice: 'robot'"),
     (["bench", "--out", "{tmp}/afile"], "--out {tmp}/afile is a file"),
     (["bench", "nosuite", "--out", "{out}"], "unknown suite 'nosuite'"),
+    # commonroad (checked before any planning)
+    (["commonroad", "{tmp}/none.xml", "--out", "{out}"], "scenario file not found"),
+    (["commonroad", STRAIGHT, "--out", "{out}"],
+     "straight.net.xml is not a CommonRoad scenario (no <commonRoad> root element)"),
+    (["commonroad", "{tmp}/noproblem.cr.xml", "--out", "{out}"],
+     "noproblem.cr.xml holds no planning problem: nothing to solve"),
+    (["commonroad", "{tmp}/behind.cr.xml", "--out", "{out}"],
+     "behind.cr.xml: no lanelet route from lanelet 3604 to goal lanelet 3450"),
+    (["commonroad", CR_URBAN, "--out", "{out}", "--vehicle-type", "7"],
+     "unknown vehicle type 7; CommonRoad's are 1 (FORD_ESCORT), 2 (BMW_320i), 3 (VW_VANAGON)"),
+    (["commonroad", CR_URBAN, "--out", "{out}", "--planning-problem", "5"],
+     "ZAM_Urban-3_1.xml has no planning problem 5 (it has 11)"),
+    (["commonroad", CR_URBAN, "--out", "{tmp}/afile"], "--out {tmp}/afile is a file"),
 ]
 
 

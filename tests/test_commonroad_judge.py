@@ -4,8 +4,9 @@
 vehicle type 2, steering rate at most 0.4 rad/s) reconstructs, between every two states
 0.1 s apart, an input (steering rate, acceleration) within the car's limits that reaches
 the next state. The planner's centre (half the wheelbase ahead of the rear axle, on the
-path's tangent turned by the slip angle) is converted to CommonRoad's state: the rear axle
-plus ``b`` along the body, the body's heading, the rear axle's speed and the wheel angle.
+path's tangent turned by the slip angle) is converted to CommonRoad's state by
+:func:`splineplan.commonroad.ks_states`: the rear axle plus ``b`` along the body, the
+body's heading, the rear axle's speed and the wheel angle.
 """
 
 from __future__ import annotations
@@ -29,49 +30,13 @@ STEERING_TOLERANCE = 0.01
 
 
 def commonroad_states(tr: Trajectory, params: TrajectoryParams) -> list:
-    """The trajectory every :data:`DT` seconds as CommonRoad's KS states.
+    """The trajectory every :data:`DT` seconds as CommonRoad's KS states of the BMW 320i
+    (:func:`splineplan.commonroad.ks_states`) with the planner's wheelbase."""
+    from dataclasses import replace
 
-    The car's body follows from its centre's path as a kinematic single-track car's does:
-    the rear axle, half the wheelbase behind the centre, is towed without slipping
-    sideways (``theta' = v_c . n(theta) / (L / 2)``, integrated every millisecond); its speed
-    is the centre's along the body, and the wheel angle gives the body's turn rate,
-    ``tan(delta) = L theta' / v_rear``.
-    """
-    from commonroad.scenario.state import KSState
-    from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
+    from splineplan.commonroad import ks_states, vehicle
 
-    b = VehicleDynamics.KS(VehicleType.BMW_320i).parameters.b
-    L = params.wheelbase
-    t = np.arange(0.0, tr.t[-1], DT / 100)
-    x, y, head, v = _centre_at(tr, t)
-    vx, vy = v * np.cos(head), v * np.sin(head)
-    theta = np.empty(len(t))
-    theta[0] = head[0]  # the start is straight
-    for i in range(len(theta) - 1):
-        turn = (-vx[i] * math.sin(theta[i]) + vy[i] * math.cos(theta[i])) / (L / 2)
-        theta[i + 1] = theta[i] + (t[i + 1] - t[i]) * turn
-    rate = np.gradient(theta, t)
-    v_rear = vx * np.cos(theta) + vy * np.sin(theta)
-    wheel = np.arctan2(L * rate, np.maximum(v_rear, 1e-3))
-    rear = np.column_stack((x - L / 2 * np.cos(theta), y - L / 2 * np.sin(theta)))
-    cog = rear + b * np.column_stack((np.cos(theta), np.sin(theta)))
-    keep = np.arange(0, len(t), 100)
-    return [KSState(position=cog[i], orientation=float(theta[i]), velocity=float(v_rear[i]),
-                    steering_angle=float(wheel[i]), time_step=k) for k, i in enumerate(keep)]
-
-
-def _centre_at(tr: Trajectory, t: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The centre's x, y [m], path heading [rad] and speed [m/s] at times ``t`` [s]: the
-    speed changes at constant acceleration between samples (as the profile was made), so
-    that positions and speeds agree at any speed, and the pose follows the arc length."""
-    i = np.clip(np.searchsorted(tr.t, t, side="right") - 1, 0, len(tr.t) - 2)
-    ds = tr.s[i + 1] - tr.s[i]
-    acc = (tr.speed[i + 1] ** 2 - tr.speed[i] ** 2) / (2 * ds)
-    tau = t - tr.t[i]
-    s = np.minimum(tr.s[i] + tr.speed[i] * tau + acc * tau**2 / 2, tr.s[i + 1])
-    v = np.maximum(tr.speed[i] + acc * tau, 0.0)
-    head = np.interp(s, tr.s, np.unwrap(tr.heading))
-    return np.interp(s, tr.s, tr.x), np.interp(s, tr.s, tr.y), head, v
+    return ks_states(tr, replace(vehicle(2), wheelbase=params.wheelbase), DT)
 
 
 def judge(tr: Trajectory, params: TrajectoryParams | None = None) -> bool:

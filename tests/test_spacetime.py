@@ -208,3 +208,16 @@ def test_bad_moving_obstacles_are_refused() -> None:
         MovingObstacle("x", np.array([0.0, 0.0]), np.zeros((2, 2)), np.zeros(2), L, W)
     with pytest.raises(SplineplanError, match="length and width"):
         MovingObstacle("x", np.array([0.0]), np.zeros((1, 2)), np.zeros(1), 0.0, W)
+
+
+def test_retime_keeps_under_a_given_speed_limit() -> None:
+    """``v_limit`` lowers the path's own limit (CommonRoad's goal timing caps the speed):
+    the car never exceeds it, and among the same obstacle arrives later than without it."""
+    tr = corridor_plan()
+    ob = MovingObstacle("far", np.array([0.0, 30.0]), np.array([[500.0, 50.0], [510.0, 50.0]]),
+                        np.zeros(2), L, W)
+    free, _ = retime(tr, [ob], TP, t0=0.0, length=L, width=W, margin=MARGIN)
+    cap = np.full(len(tr.s), 6.0)
+    slow, _ = retime(tr, [ob], TP, t0=0.0, length=L, width=W, margin=MARGIN, v_limit=cap)
+    assert slow.speed.max() <= 6.0 + 1e-6 < free.speed.max()
+    assert slow.t[-1] > free.t[-1] + 1.0

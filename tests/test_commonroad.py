@@ -1,0 +1,160 @@
+"""CommonRoad scenarios in, certified solutions out (:mod:`splineplan.commonroad`).
+
+Each bundled public scenario (tests/data/commonroad, sources in its README) is solved and
+the solution judged by commonroad-drivability-checker itself: no collision with any obstacle
+at its time, the car inside the road boundary, ``trajectory_feasibility`` with the KS model
+(and, stricter, with the wheel angle reached at every step, as in
+``test_commonroad_judge``), the planning problem's goal reached, and the start state right.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import ROOT
+
+cr = pytest.importorskip("splineplan.commonroad")
+pytest.importorskip("commonroad_dc.feasibility.feasibility_checker",
+                    reason="commonroad-drivability-checker is a test extra")
+
+DATA = ROOT / "tests" / "data" / "commonroad"
+
+
+@pytest.fixture(scope="module")
+def solved() -> dict[str, cr.CommonRoadPlan]:
+    """Each bundled scenario that has a solution, solved once for the module."""
+    out = {}
+    for name in ("ZAM_Urban-3_1", "ZAM_Urban-2_1", "USA_US101-16_1_T-1", "USA_Lanker-1_16_T-1",
+                 "RUS_Bicycle-11_1_T-1"):
+        out[name] = cr.plan(cr.read(DATA / f"{name}.xml"))
+    return out
+
+
+def _strictly_feasible(res: cr.CommonRoadPlan) -> bool:
+    """``trajectory_feasibility`` whose reconstructed inputs also reach every state's wheel
+    angle (CommonRoad's own criteria compare only the pose)."""
+    from commonroad_dc.feasibility import feasibility_checker as fc
+    from commonroad_dc.feasibility.vehicle_dynamics import VehicleDynamics, VehicleType
+    from test_commonroad_judge import _reach_steering, _with_steering
+
+    ok, _ = fc.trajectory_feasibility(
+        cr.solution_trajectory(res), VehicleDynamics.KS(VehicleType(res.vehicle.type_id)),
+        res.problem.dt, objective=_reach_steering, criteria=_with_steering)
+    return bool(ok)
+
+
+@pytest.mark.parametrize("name", ["ZAM_Urban-3_1", "ZAM_Urban-2_1", "USA_US101-16_1_T-1",
+                                  "USA_Lanker-1_16_T-1", "RUS_Bicycle-11_1_T-1"])
+def test_solutions_pass_the_drivability_checker(solved: dict[str, cr.CommonRoadPlan],
+                                                name: str) -> None:
+    res = solved[name]
+    cert = cr.certify(res)
+    assert cert == cr.Certificate(True, True, True, True, True)
+    assert res.goal_reached
+    assert _strictly_feasible(res)
+    # the solution ends at the first state that reaches the goal
+    goal = res.problem.planning_problem.goal
+    assert goal.is_reached(res.states[-1])
+    assert not any(goal.is_reached(s) for s in res.states[:-1])
+
+
+def test_static_obstacles_are_passed_with_room(solved: dict[str, cr.CommonRoadPlan]) -> None:
+    """The hand-made scenarios' static obstacles stand in the lane: the car goes round
+    them, keeping level 2's safety margin from its footprint (less the centimetres between
+    the planner's centre and CommonRoad's reference point)."""
+    import shapely
+
+    for name in ("ZAM_Urban-3_1", "ZAM_Urban-2_1"):
+        res = solved[name]
+        assert len(res.problem.scenario.static_obstacles) >= 1
+        car = res.vehicle
+        polys = [shapely.Polygon(p) for p in cr.static_obstacles(res.problem.scenario).polygons()]
+        gaps = []
+        for st in res.states:
+            c, s = np.cos(st.orientation), np.sin(st.orientation)
+            hl, hw = car.length / 2, car.width / 2
+            box = shapely.Polygon([st.position + a * np.array([c, s]) + b * np.array([-s, c])
+                                   for a, b in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw))])
+            gaps.append(min(box.distance(p) for p in polys))
+        assert min(gaps) > 0.1
+
+
+def test_a_lane_change_and_an_intersection_turn(solved: dict[str, cr.CommonRoadPlan]) -> None:
+    """Level 1 on the lanelet graph: the freeway's goal is in the next lane (a lane
+    change), the Lankershim goal beyond a turn at an intersection."""
+    lane = solved["USA_US101-16_1_T-1"]
+    assert lane.route.lane_changes >= 1
+    net = lane.problem.scenario.lanelet_network
+    first = net.find_lanelet_by_id(lane.route.lanelets[0])
+    assert lane.route.lanelets[1] in (first.adj_left, first.adj_right)
+    turn = solved["USA_Lanker-1_16_T-1"]
+    heading = np.unwrap([s.orientation for s in turn.states])
+    assert np.ptp(heading) > 0.5  # it turns through the junction
+
+
+def test_the_solution_file_reads_back(tmp_path: Path,
+                                      solved: dict[str, cr.CommonRoadPlan]) -> None:
+    from commonroad.common.solution import (
+        CommonRoadSolutionReader,
+        CostFunction,
+        VehicleModel,
+        VehicleType,
+    )
+
+    res = solved["ZAM_Urban-3_1"]
+    path = cr.write_solution(res, tmp_path / "out")
+    sol = CommonRoadSolutionReader.open(str(path))
+    pps = sol.planning_problem_solutions[0]
+    assert pps.vehicle_model == VehicleModel.KS
+    assert pps.vehicle_type == VehicleType.BMW_320i
+    assert pps.cost_function == CostFunction.SM1
+    assert len(pps.trajectory.state_list) == len(res.states)
+    assert np.allclose(pps.trajectory.state_list[-1].position, res.states[-1].position)
+
+
+@pytest.mark.parametrize("vehicle_type", [1, 3])
+def test_other_vehicle_types(vehicle_type: int) -> None:
+    """The Ford Escort and the VW Vanagon, with their own wheelbase and steering limits."""
+    res = cr.plan(cr.read(DATA / "ZAM_Urban-3_1.xml"), vehicle_type=vehicle_type)
+    assert res.vehicle.type_id == vehicle_type
+    assert cr.certify(res).passed
+
+
+def test_the_vehicle_is_commonroads() -> None:
+    """BMW 320i: CommonRoad's wheelbase, steering rate and body for levels 2 and 3."""
+    car = cr.vehicle(2)
+    assert car.wheelbase == pytest.approx(2.578, abs=1e-3)
+    assert car.max_steering_rate == pytest.approx(0.4)
+    tp = car.trajectory_params(20.0)
+    assert tp.wheelbase == car.wheelbase and tp.max_steering_rate == car.max_steering_rate
+    rp = car.roadmap_params()
+    assert (rp.vehicle_length, rp.vehicle_width) == (car.length, car.width)
+
+
+def test_the_core_imports_no_commonroad() -> None:
+    """splineplan works without the extra: the planner and the CLI import nothing of
+    commonroad, and without it the adapter says so in one line."""
+    code = ("import sys; import splineplan.cli, splineplan.planner, splineplan.pipeline; "
+            "assert not [m for m in sys.modules if m.startswith(('commonroad', 'vehiclemodels'))]; "
+            "sys.modules['commonroad'] = None\n"
+            "from splineplan import commonroad as cr\n"
+            "from splineplan.errors import SplineplanError\n"
+            "try:\n    cr.read('x.xml')\nexcept SplineplanError as e:\n    print(e)\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, check=True)
+    assert out.stdout.strip() == ("CommonRoad support needs the commonroad extra: "
+                                  "pip install 'splineplan[commonroad]'")
+
+
+def test_the_command_writes_the_solution_and_the_picture(tmp_path: Path) -> None:
+    from splineplan.cli import main
+
+    out = tmp_path / "out"
+    assert main(["commonroad", str(DATA / "ZAM_Urban-3_1.xml"), "--out", str(out),
+                 "--plot"]) == 0
+    names = sorted(p.name for p in out.iterdir())
+    assert names == ["ZAM_Urban-3_1.png", "solution_KS2:SM1:ZAM_Urban-3_1:2018b.xml"]
