@@ -53,6 +53,10 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "optimise": ((F2, F2, F2, F2, F1, F1, F1, I1, F3, I1, I1, I2, B1, B1, i8, f8, f8, i8,
                       i8, nt.Tuple(_CHECKER)),),
     }),
+    "splineplan.spacetime": (1.5, {
+        "_drive": ((F1, F1, F1, F1, f8, f8, f8, f8),),
+        "_safe_speed": ((f8, F1, F1, i8, i8, f8, f8),),
+    }),
     "splineplan.roadmap": (10.2, {
         "_cull_kernel": ((F2, F2, F2, f8),),
         "_slab": ((f8, f8, f8, f8),),

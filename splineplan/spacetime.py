@@ -31,11 +31,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from splineplan.errors import ParameterError
-from splineplan.geometry import FloatArray, wrap_angle
+from splineplan.geometry import FloatArray, kernel_floats, wrap_angle
 from splineplan.obstacles import Obstacles
 from splineplan.speed import speed_profile
 from splineplan.trajectory import Trajectory, TrajectoryParams, _times, speed_limit
@@ -268,38 +269,35 @@ def box_gap(c1: FloatArray, h1: FloatArray, size1: tuple[float, float], c2: Floa
     frame); rectangles that cross without a corner inside the other are caught by the
     separating-axis test.
     """
-    u1 = np.column_stack((np.cos(h1), np.sin(h1)))
-    u2 = np.column_stack((np.cos(h2), np.sin(h2)))
-    half1 = np.array(size1) / 2.0
-    half2 = np.array(size2) / 2.0
-    d = c2 - c1
-    gap = np.minimum(_corner_gap(-d, u2, u1, half1, half2), _corner_gap(d, u1, u2, half2, half1))
+    c1x, s1x = np.cos(h1), np.sin(h1)
+    c2x, s2x = np.cos(h2), np.sin(h2)
+    l1, w1 = size1[0] / 2.0, size1[1] / 2.0
+    l2, w2 = size2[0] / 2.0, size2[1] / 2.0
+    dx, dy = c2[:, 0] - c1[:, 0], c2[:, 1] - c1[:, 1]
+    gap = np.minimum(_corner_gap(-dx, -dy, c2x, s2x, c1x, s1x, l1, w1, l2, w2),
+                     _corner_gap(dx, dy, c1x, s1x, c2x, s2x, l2, w2, l1, w1))
     # separating axes: the four sides' directions
-    cos = np.abs(np.sum(u1 * u2, axis=1))
-    sin = np.abs(u1[:, 0] * u2[:, 1] - u1[:, 1] * u2[:, 0])
-    along1 = np.abs(np.sum(d * u1, axis=1))
-    across1 = np.abs(u1[:, 0] * d[:, 1] - u1[:, 1] * d[:, 0])
-    along2 = np.abs(np.sum(d * u2, axis=1))
-    across2 = np.abs(u2[:, 0] * d[:, 1] - u2[:, 1] * d[:, 0])
-    overlap = ((along1 <= half1[0] + half2[0] * cos + half2[1] * sin)
-               & (across1 <= half1[1] + half2[0] * sin + half2[1] * cos)
-               & (along2 <= half2[0] + half1[0] * cos + half1[1] * sin)
-               & (across2 <= half2[1] + half1[0] * sin + half1[1] * cos))
+    cos = np.abs(c1x * c2x + s1x * s2x)
+    sin = np.abs(c1x * s2x - s1x * c2x)
+    overlap = ((np.abs(dx * c1x + dy * s1x) <= l1 + l2 * cos + w2 * sin)
+               & (np.abs(dy * c1x - dx * s1x) <= w1 + l2 * sin + w2 * cos)
+               & (np.abs(dx * c2x + dy * s2x) <= l2 + l1 * cos + w1 * sin)
+               & (np.abs(dy * c2x - dx * s2x) <= w2 + l1 * sin + w1 * cos))
     return np.where(overlap, 0.0, gap)
 
 
-def _corner_gap(d: FloatArray, u_from: FloatArray, u_to: FloatArray, half_to: FloatArray,
-                half_from: FloatArray) -> FloatArray:
-    """Smallest distance ``(N,)`` from the corners of the rectangles with axis ``u_from`` and
-    half sizes ``half_from``, centred at ``d`` from the others, to those others (axis
-    ``u_to``, half sizes ``half_to``)."""
-    v_from = np.column_stack((-u_from[:, 1], u_from[:, 0]))
-    v_to = np.column_stack((-u_to[:, 1], u_to[:, 0]))
-    best = np.full(len(d), np.inf)
+def _corner_gap(dx: FloatArray, dy: FloatArray, cf: FloatArray, sf: FloatArray,
+                ct: FloatArray, st: FloatArray, lt: float, wt: float, lf: float, wf: float
+                ) -> FloatArray:
+    """Smallest distance ``(N,)`` from the corners of the rectangles with heading
+    (``cf``, ``sf``) and half sizes ``lf``, ``wf``, centred at (``dx``, ``dy``) from the
+    others, to those others (heading ``ct``, ``st``, half sizes ``lt``, ``wt``)."""
+    best = np.full(len(dx), np.inf)
     for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-        p = d + (sx * half_from[0]) * u_from + (sy * half_from[1]) * v_from
-        qx = np.maximum(np.abs(np.sum(p * u_to, axis=1)) - half_to[0], 0.0)
-        qy = np.maximum(np.abs(np.sum(p * v_to, axis=1)) - half_to[1], 0.0)
+        px = dx + (sx * lf) * cf - (sy * wf) * sf
+        py = dy + (sx * lf) * sf + (sy * wf) * cf
+        qx = np.maximum(np.abs(px * ct + py * st) - lt, 0.0)
+        qy = np.maximum(np.abs(py * ct - px * st) - wt, 0.0)
         best = np.minimum(best, np.hypot(qx, qy))
     return best
 
@@ -391,39 +389,21 @@ def _forward(s: FloatArray, cap: FloatArray, t0: float, v0: float, dt: float,
              ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Time steps of driving along ``s`` as fast as the speed cap (a profile over the
     stations) allows, staying behind ``wall`` (a station per time step from ``t0``) with
-    room to brake behind every later wall. Returns times, stations and speeds; once no wall
-    lies ahead, the rest of the cap from the speed reached, timed at the path's stations."""
+    room to brake behind every later wall (:func:`_drive`). Returns times, stations and
+    speeds; once no wall lies ahead, the rest of the cap from the speed reached, timed at
+    the path's stations."""
     end = float(s[-1])
-    walls = np.full(1, np.inf) if wall is None else wall
-    m = len(walls)
+    walls = kernel_floats(np.full(1, np.inf) if wall is None else wall)
     # suffix minimum of the walls: a stop before it is safe against all of them
-    floor = np.minimum.accumulate(walls[::-1])[::-1]
-    steps_t, steps_s, steps_v = [t0], [0.0], [v0]
-    pos, vel = 0.0, v0
-    choices = (a_max, a_max / 2.0, 0.0, -d_max / 4.0, -d_max / 2.0, -d_max)
-    j = 0
-    while j < m and floor[j] < np.inf and pos < end - 1e-9:
-        j += 1
-        vmax = max(float(np.interp(pos, s, cap)), 0.0)
-        nv, npos = vel, pos
-        for a in choices:
-            nv = min(max(vel + a * dt, 0.0), vmax)
-            if a < 0 and vel + a * dt < 0:  # stops within the step
-                npos = pos + vel * vel / (-2.0 * a)
-            else:
-                npos = pos + (vel + nv) / 2.0 * dt
-            if j >= m or npos + nv * nv / (2.0 * d_max) < floor[j] or _brakes_behind(
-                    npos, nv, walls[j:], dt, d_max):
-                break
-        pos, vel = npos, nv  # full braking if nothing stays behind: the conflict shows
-        steps_t.append(t0 + j * dt)
-        steps_s.append(min(pos, end))
-        steps_v.append(vel)
-    t, st, v = np.asarray(steps_t), np.asarray(steps_s), np.asarray(steps_v)
+    floor = kernel_floats(np.minimum.accumulate(walls[::-1])[::-1])
+    n, st, v = _drive(kernel_floats(s), kernel_floats(cap), walls, floor, float(v0),
+                      float(dt), float(a_max), float(d_max))
+    t = t0 + dt * np.arange(n + 1)
+    pos, vel = float(st[-1]), float(v[-1])
     if pos >= end - 1e-9:
-        if len(st) > 1 and st[-2] < end:  # the last step ends at the path's end
-            frac = (end - st[-2]) / max(pos - st[-2], 1e-12)
-            t[-1] = t[-2] + frac * dt
+        st[-1] = end
+        if n > 0 and st[-2] < end:  # the last step ends at the path's end
+            t[-1] = t[-2] + (end - st[-2]) / max(pos - st[-2], 1e-12) * dt
         return t, st, v
     # no wall ahead any more: the cap from here on
     rest = s > pos + 1e-9
@@ -436,13 +416,72 @@ def _forward(s: FloatArray, cap: FloatArray, t0: float, v0: float, dt: float,
             np.concatenate((v, rv[1:][ok[1:]])))
 
 
-def _brakes_behind(pos: float, vel: float, wall: FloatArray, dt: float, d_max: float) -> bool:
-    """Whether braking fully from ``pos``, ``vel`` stays behind ``wall[j]`` at each later
-    step ``j`` (``wall[0]`` is now)."""
-    tau = np.arange(len(wall)) * dt
-    stop = vel / d_max
-    travel = np.where(tau < stop, vel * tau - d_max * tau * tau / 2.0, vel * vel / (2 * d_max))
-    return bool(np.all(pos + travel < wall))
+@njit(cache=True)
+def _drive(s: FloatArray, cap: FloatArray, walls: FloatArray, floor: FloatArray, v0: float,
+           dt: float, a_max: float, d_max: float) -> tuple[int, FloatArray, FloatArray]:
+    """The forward pass in time while a wall lies ahead: each step takes the highest speed
+    within the cap and the acceleration from which full braking stays behind every later
+    wall (:func:`_safe_speed`), or brakes fully where none does. Returns the steps taken and
+    the stations and speeds at steps ``0 .. n``."""
+    m = walls.shape[0]
+    end = s[-1]
+    pos_out = np.empty(m + 1)
+    vel_out = np.empty(m + 1)
+    pos, vel = 0.0, v0
+    pos_out[0], vel_out[0] = pos, vel
+    window = int(np.max(cap) / (d_max * dt)) + 2  # steps to stop from the highest speed
+    j = 0
+    while j < m and floor[j] < np.inf and pos < end - 1e-9:
+        j += 1
+        vmax = max(np.interp(pos, s, cap), 0.0)
+        nv = min(vel + a_max * dt, vmax)
+        step = 0.5 * (vel + nv) * dt
+        if j < m:
+            for _ in range(3):  # the safe speed depends on where the step ends
+                safe = _safe_speed(pos + step, walls, floor, j, window, dt, d_max)
+                if nv <= safe + 1e-12:
+                    break
+                nv = max(safe, vel - d_max * dt, 0.0)
+                step = 0.5 * (vel + nv) * dt
+                if nv == 0.0 and vel < d_max * dt:  # stops within the step, braking fully
+                    step = vel * vel / (2.0 * d_max)
+        pos += step
+        vel = nv
+        pos_out[j], vel_out[j] = pos, vel
+    return j, pos_out[:j + 1].copy(), vel_out[:j + 1].copy()
+
+
+@njit(cache=True)
+def _safe_speed(pos: float, walls: FloatArray, floor: FloatArray, j: int, window: int,
+                dt: float, d_max: float) -> float:
+    """Highest speed [m/s] at station ``pos`` at step ``j`` from which full braking stays
+    behind ``walls`` at every later step; -1 where ``pos`` is not behind the wall now.
+
+    Braking from ``v`` covers ``v tau - d tau^2 / 2`` in ``tau`` until it stops after
+    ``v / d``, ``v^2 / (2 d)`` in all: behind a wall ``w`` ahead at ``tau`` exactly when
+    ``v < sqrt(2 d w)`` if that stops by ``tau``, else ``v < w / tau + d tau / 2``. After
+    ``window`` steps every speed has stopped: the lowest later wall bounds the rest.
+    """
+    m = walls.shape[0]
+    if walls[j] - pos <= 0.0:
+        return -1.0
+    best = np.inf
+    last = min(m, j + window)
+    for i in range(j + 1, last):
+        w = walls[i] - pos
+        if w == np.inf:
+            continue
+        if w <= 0.0:
+            return -1.0
+        tau = (i - j) * dt
+        stop = np.sqrt(2.0 * d_max * w)
+        best = min(best, stop if stop <= d_max * tau else w / tau + 0.5 * d_max * tau)
+    if last < m and floor[last] < np.inf:
+        w = floor[last] - pos
+        if w <= 0.0:
+            return -1.0
+        best = min(best, np.sqrt(2.0 * d_max * w))
+    return best
 
 
 def _touched(plan: tuple[FloatArray, FloatArray, FloatArray], occ: Occupancy,
@@ -508,47 +547,30 @@ def retime(trajectory: Trajectory, moving: Sequence[MovingObstacle], params: Tra
 
 
 def _with_plan(tr: Trajectory, plan: SpeedPlan, t0: float) -> Trajectory:
-    """``tr`` resampled at its own stations plus the stations where the plan waits, with the
-    plan's times and speeds (a trajectory that the plan leaves unfinished ends there)."""
+    """``tr`` at the plan's steps and at its own stations, with the plan's times and speeds
+    (a wait is samples at one station; a trajectory the plan leaves unfinished ends
+    there)."""
     t, s, v = plan.t - t0, plan.s, plan.v
-    stopped = (v <= 1e-9) & (np.arange(len(v)) > 0) & (s < tr.s[-1] - 1e-9)  # not the end
-    waits: list[tuple[float, float, float]] = []  # station, arrival, departure
-    j = 0
-    while j < len(v):
-        if stopped[j]:
-            k = j
-            while k + 1 < len(v) and v[k + 1] <= 1e-9:
-                k += 1
-            waits.append((float(s[j]), float(t[j]), float(t[k])))
-            j = k + 1
-        else:
-            j += 1
-    reached = float(s[-1])
-    keep = tr.s <= reached + 1e-9
-    stations = np.concatenate((tr.s[keep], [w[0] for w in waits for _ in (0, 1)]))
-    order = np.argsort(stations, kind="stable")
-    stations = stations[order]
-    # first time each station is reached; the departure time for a wait's second sample
-    moving_mask = np.concatenate(([True], np.diff(s) > 1e-12))
-    ts = np.interp(stations, s[moving_mask], t[moving_mask])
-    vs = np.interp(stations, s[moving_mask], v[moving_mask])
-    nkeep = int(keep.sum())
-    is_wait = order >= nkeep
-    wait_idx = order[is_wait] - nkeep
-    dep = np.array([w[2] for w in waits for _ in (0, 1)])
-    arr = np.array([w[1] for w in waits for _ in (0, 1)])
-    second = np.zeros(len(wait_idx), dtype=bool)
-    second[1::2] = True  # each wait's two samples are adjacent and in order
-    ts[is_wait] = np.where(second, dep[wait_idx], arr[wait_idx])
-    vs[is_wait] = 0.0
-    ts = np.maximum.accumulate(ts)
+    # each of the trajectory's own stations within reach, at the time the plan passes it
+    own = tr.s[(tr.s > s[0]) & (tr.s < s[-1])]
+    k = np.clip(np.searchsorted(s, own, side="left"), 1, len(s) - 1)
+    ds = s[k] - s[k - 1]
+    frac = np.where(ds > 0, (own - s[k - 1]) / np.where(ds > 0, ds, 1.0), 1.0)
+    t_own = t[k - 1] + frac * (t[k] - t[k - 1])
+    v_own = v[k - 1] + frac * (v[k] - v[k - 1])
+    times = np.concatenate((t, t_own))
+    order = np.argsort(times, kind="stable")
+    times, stations = times[order], np.concatenate((s, own))[order]
+    speeds = np.concatenate((v, v_own))[order]
+    keep = np.concatenate(([True], np.diff(times) > 1e-9))
+    times, stations, speeds = times[keep], np.maximum.accumulate(stations[keep]), speeds[keep]
     head = np.unwrap(tr.heading)
 
     def at(a: FloatArray) -> FloatArray:
         return np.asarray(np.interp(stations, tr.s, a))
 
     return replace(
-        tr, t=ts, x=at(tr.x), y=at(tr.y), heading=wrap_angle(at(head)), speed=vs,
+        tr, t=times, x=at(tr.x), y=at(tr.y), heading=wrap_angle(at(head)), speed=speeds,
         curvature=at(tr.curvature), s=stations, clearance_obstacles=at(tr.clearance_obstacles),
         clearance_road=at(tr.clearance_road))
 
