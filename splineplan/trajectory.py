@@ -333,6 +333,29 @@ def plan_trajectory(
     obstacles = Obstacles.empty() if obstacles is None else obstacles
     if not polish:
         params = replace(params, max_iterations=0, repair_rounds=0)
+    traj = _plan_polygons(roadmap, corridor, obstacles, params, start_heading, start_speed,
+                          end_speed, polish)
+    if traj.feasible or not polish or len(roadmap.band_lo) != len(roadmap.s):
+        return traj
+    # no feasible curve keeps the separation of level 2's placed vertices: the curve
+    # through the free intervals' midpoints, without the bands, as the paper's
+    path = np.asarray(roadmap.path)
+    plain = replace(roadmap, xy=np.asarray(roadmap.graph_xy)[path],
+                    l=np.asarray(roadmap.graph_l)[path], band_lo=np.zeros(0),
+                    band_hi=np.zeros(0))
+    other = _plan_polygons(plain, corridor, obstacles, params, start_heading, start_speed,
+                           end_speed, polish)
+    log.debug("no feasible curve within level 2's bands; through the midpoints: %s",
+              other.feasible)
+    return _less_violating(traj, other, params)
+
+
+def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
+                   params: TrajectoryParams, start_heading: float | None,
+                   start_speed: float, end_speed: float | None, polish: bool
+                   ) -> Trajectory:
+    """:func:`plan_trajectory` along one placement of the roadmap's vertices: both control
+    polygons, then the detour."""
     smooth = _sharp_bend(roadmap, corridor, params)
     frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
@@ -405,7 +428,11 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
                                    smooth, frame=frame)
     checker = _Checker.build(corridor, obstacles, rp, pool, params.road_margin)
-    curve, refinements, doubled, samples = _refine(pool, counts, checker, params)
+    band = None
+    if len(roadmap.band_lo) == len(roadmap.s):
+        band = (np.asarray(roadmap.s, dtype=float), np.asarray(roadmap.band_lo, dtype=float),
+                np.asarray(roadmap.band_hi, dtype=float))
+    curve, refinements, doubled, samples = _refine(pool, counts, checker, params, band)
     opt = _Optimiser(curve, checker, params, samples)
     kappa_before = opt.kappa.copy()
     tried, accepted, refused, rounds = opt.run()
