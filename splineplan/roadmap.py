@@ -404,7 +404,7 @@ def place_vertices(corridor: Corridor, lines: _Lines, line: NDArray[np.int64],
     return _place_kernel(_f64(lines.station[line]), _f64(lo), _f64(hi), _f64(lines.lo[line]),
                          _f64(lines.hi[line]), _f64(right), _f64(left), junction, float(l0),
                          params.enough_separation, road_extra, float(params.lane_width),
-                         max(params.lane_width - params.vehicle_width, 0.0) / 2.0,
+                         float(params.vehicle_width),
                          PLACE_RATE, PLACE_HOLD, PLACE_ROAD_RESERVE, BAND_KEEP)
 
 
@@ -412,18 +412,21 @@ def place_vertices(corridor: Corridor, lines: _Lines, line: NDArray[np.int64],
 def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: FloatArray,
                   road_hi: FloatArray, right: FloatArray, left: FloatArray,
                   junction: NDArray[np.bool_], l0: float, enough: float, road_extra: float,
-                  lane_width: float, lane_tol: float, rate: float, hold: float,
+                  lane_width: float, vehicle_width: float, rate: float, hold: float,
                   road_reserve: float, keep: float
                   ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
     """:func:`place_vertices` along the path (``st``: the lines' stations; ``road_lo``,
     ``road_hi``: the lines' bounds from the road or keep offsets; ``right``, ``left``:
-    the road's edges, for the lanes; ``road_extra`` [m]: step 2's cap; ``lane_tol`` [m]:
-    the band's half width in a lane; ``rate``: :data:`PLACE_RATE`)."""
+    the road's edges, for the lanes; ``road_extra`` [m]: step 2's cap; ``vehicle_width``
+    [m]: for the band in a lane, which keeps the footprint inside it; ``rate``,
+    ``hold``, ``road_reserve``, ``keep``: :data:`PLACE_RATE`, :data:`PLACE_HOLD`,
+    :data:`PLACE_ROAD_RESERVE`, :data:`BAND_KEEP`)."""
     m = len(lo)
     out = np.empty(m)
     b_lo = np.empty(m)
     b_hi = np.empty(m)
     at_lane = np.zeros(m, dtype=np.bool_)
+    lane_tol = np.zeros(m)
     sep = np.empty(m)
     pref = np.nan
     for j in range(m):
@@ -484,6 +487,7 @@ def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: Float
         if a2 - 1e-9 <= c <= b2 + 1e-9:
             pref = c
             at_lane[j] = True
+            lane_tol[j] = max(lw - vehicle_width, 0.0) / 2.0
         out[j] = min(max(c, a2), b2)
     # the separation a vertex ahead or behind must reach bounds this one's offset by
     # ``rate`` per metre between them, so that the vertices leave the lane in time
@@ -516,8 +520,8 @@ def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: Float
         give = (1.0 - keep) * sep[j]
         b_lo[j], b_hi[j] = max(low[j] - give, lo[j]), min(high[j] + give, hi[j])
         if at_lane[j] and abs(v - out[j]) < 1e-9:
-            b_lo[j] = max(b_lo[j], v - lane_tol)
-            b_hi[j] = min(b_hi[j], v + lane_tol)
+            b_lo[j] = max(b_lo[j], v - lane_tol[j])
+            b_hi[j] = min(b_hi[j], v + lane_tol[j])
         out[j] = v
     return out, b_lo, b_hi
 
