@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
@@ -201,6 +201,15 @@ class Roadmap:
         pts = np.concatenate((pts, self.xy[-1:]))
         keep = np.concatenate(([True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9))
         return np.asarray(pts[keep])
+
+    def at_midpoints(self) -> Roadmap:
+        """The same path with its vertices at their free intervals' midpoints (the paper's
+        vertices) and no bands."""
+        path = np.asarray(self.path)
+        xy = np.asarray(self.graph_xy)[path]
+        return replace(self, xy=xy, l=np.asarray(self.graph_l)[path],
+                       length=float(np.hypot(*np.diff(xy, axis=0).T).sum()),
+                       band_lo=np.zeros(0), band_hi=np.zeros(0))
 
     @property
     def bottleneck_s(self) -> float:

@@ -339,12 +339,8 @@ def plan_trajectory(
         return traj
     # no feasible curve keeps the separation of level 2's placed vertices: the curve
     # through the free intervals' midpoints, without the bands, as the paper's
-    path = np.asarray(roadmap.path)
-    plain = replace(roadmap, xy=np.asarray(roadmap.graph_xy)[path],
-                    l=np.asarray(roadmap.graph_l)[path], band_lo=np.zeros(0),
-                    band_hi=np.zeros(0))
-    other = _plan_polygons(plain, corridor, obstacles, params, start_heading, start_speed,
-                           end_speed, polish)
+    other = _plan_polygons(roadmap.at_midpoints(), corridor, obstacles, params, start_heading,
+                           start_speed, end_speed, polish)
     log.debug("no feasible curve within level 2's bands; through the midpoints: %s",
               other.feasible)
     return _less_violating(traj, other, params)
