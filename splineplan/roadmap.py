@@ -394,7 +394,8 @@ def place_vertices(corridor: Corridor, lines: _Lines, line: NDArray[np.int64],
        (nearest ``l0`` [m]) or the one it changed to when that lane's centre was not
        among them, the lane centre nearest it that is. Lanes are ``lane_width`` wide
        across the corridor. In a junction (between two edges' own stretches) lanes do not
-       count: the middle of the offsets of step 2.
+       count: the offset of the lane it came from, as near as step 2 allows (the middle of
+       step 2's offsets where the path starts in the junction).
 
     The band of a vertex is the set of step 1 (the control polygon may trade the road's
     separation, not the obstacles'), narrowed to the lane (the footprint inside it)
@@ -473,7 +474,8 @@ def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: Float
             a2, b2 = a1, b1
         b_lo[j], b_hi[j] = a1, b1
         if junction[j]:
-            out[j] = 0.5 * (a2 + b2)
+            # no lanes across a junction: on at the lane's offset, as far as it may
+            out[j] = min(max(pref if not np.isnan(pref) else 0.5 * (a2 + b2), a2), b2)
             continue
         # step 3: the route's lane
         width = left[j] - right[j]
