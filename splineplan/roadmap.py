@@ -228,7 +228,8 @@ def plan_roadmap(
     Sweep lines stand at stations ``0, d, 2d, ...`` and at the corridor's end; each is the
     straight segment along the reference line's normal between the road boundaries. Its
     free intervals are the points at least ``params.inflation`` [m] from every obstacle and
-    from both road edges (lateral offset within ``[right + inflation, left - inflation]``).
+    ``params.road_inflation`` [m] from both road edges (lateral offset within
+    ``[right + road_inflation, left - road_inflation]``).
     A vertex stands at each interval's midpoint. An arc joins vertices ``a`` and ``b`` of
     consecutive lines when the vehicle (a point in the grown configuration space) can pass
     from ``a`` to ``b``: along ``a``'s line inside its free interval, across a straight
@@ -242,7 +243,10 @@ def plan_roadmap(
     chosen path with its links: a collision-free polyline.
 
     The search maximises ``min(bottleneck width, wmax)``, then minimises length, exactly
-    (dynamic programming over the sweep lines, which form a layered acyclic graph).
+    (dynamic programming over the sweep lines, which form a layered acyclic graph). The
+    chosen path's vertices then move within their intervals to keep the separation from
+    the obstacles and the lane's centre (:func:`place_vertices`); ``graph_xy`` keeps the
+    midpoints.
 
     Parameters
     ----------
