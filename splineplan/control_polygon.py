@@ -542,6 +542,14 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
         room = np.minimum(centre - lo, hi - centre)
         half = np.clip(np.minimum(band_fraction * np.maximum(hi - lo, 0.0) / 2.0,
                                   room - band_reserve), 0.0, None)
+        if len(roadmap.band_lo) == len(path):
+            # level 2's bands: no nearer the obstacles than the vertex (not for the
+            # reserve either), nor out of its lane
+            b_lo = np.asarray(roadmap.band_lo, dtype=float)[distinct]
+            b_hi = np.asarray(roadmap.band_hi, dtype=float)[distinct]
+            centre = np.clip(centre, b_lo, np.maximum(b_lo, b_hi))
+            half = np.clip(np.minimum(half, np.minimum(centre - b_lo, b_hi - centre)),
+                           0.0, None)
     else:
         centre, half = sl[:, 1], np.zeros(len(s))
     return origin, tangent, normal, centre, half
@@ -731,7 +739,7 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     return replace(roadmap, xy=xy, s=st.copy(), l=lat, width=width,
                    bottleneck_width=float(width[j]), bottleneck_index=j,
                    length=float(polyline_stations(xy)[-1]), path=path,
-                   links=np.zeros((0, 2, 2)))
+                   links=np.zeros((0, 2, 2)), band_lo=np.zeros(0), band_hi=np.zeros(0))
 
 
 @njit(cache=True)

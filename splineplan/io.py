@@ -295,6 +295,8 @@ def roadmap_from_dict(d: Mapping[str, Any]) -> Roadmap:
     """Inverse of :func:`roadmap_to_dict`."""
     kw: dict[str, Any] = {}
     for f in dataclasses.fields(Roadmap):
+        if f.name not in d and f.default_factory is not dataclasses.MISSING:
+            continue  # written before the field existed: its default
         value = d[f.name]
         if f.name == "params":
             kw[f.name] = RoadmapParams(**value)

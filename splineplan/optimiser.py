@@ -191,18 +191,46 @@ def _evaluate_kernel(ctrl: FloatArray, first: NDArray[np.int64], basis: FloatArr
     return out[0].copy(), out[1].copy(), out[2].copy()
 
 
+#: How far [m] the first curve may stray beyond level 2's bands (toward the obstacles, or
+#: out of its lane) before :func:`_refine` repairs it there.
+BAND_TOL = 0.05
+
+
+def band_excess(checker: _Checker, pos: FloatArray, station: FloatArray,
+                band: tuple[FloatArray, ...] | None) -> FloatArray:
+    """How far [m] each sample ``(m, 2)`` at ``station`` ``(m,)`` [m] lies beyond level 2's
+    bands ``(stations, low, high)`` (:attr:`splineplan.roadmap.Roadmap.band_lo`,
+    ``band_hi``, interpolated at the sample's station), 0 within them; zeros without
+    bands."""
+    if band is None or len(band[0]) < 2:
+        return np.zeros(len(pos))
+    cor = checker.corridor
+    ref = cor.to_xy(station, np.zeros(len(station)))
+    h = cor.heading_at(station)
+    lat = (pos[:, 1] - ref[:, 1]) * np.cos(h) - (pos[:, 0] - ref[:, 0]) * np.sin(h)
+    st, lo, hi = band
+    inside = (station >= st[0]) & (station <= st[-1])
+    over = np.maximum(np.interp(station, st, lo) - lat, lat - np.interp(station, st, hi))
+    return np.asarray(np.where(inside, np.maximum(over, 0.0), 0.0))
+
+
 def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
-            params: TrajectoryParams) -> tuple[_Curve, int, int, tuple[FloatArray, ...]]:
+            params: TrajectoryParams, band: tuple[FloatArray, ...] | None = None
+            ) -> tuple[_Curve, int, int, tuple[FloatArray, ...]]:
     """The first curve, repaired locally where its footprint is not clear.
 
     For each sample where the footprint touches an obstacle (with the margin) or leaves the
-    road, the left-out candidate nearest to it, among those between the control points that
+    road, or where the curve cuts a corner of its polygon more than :data:`BAND_TOL` beyond
+    level 2's ``band`` (stations, low and high lateral offsets [m]; see
+    :func:`band_excess`), giving away the separation that the roadmap keeps, the
+    left-out candidate nearest to it, among those between the control points that
     shape it, comes back; where none is left there, the shaping control point nearest to
     the sample is doubled (up to ``degree`` copies: repeated control points pull the curve
     onto its control polygon, undoing the corner cut). At most ``repair_rounds`` rounds,
     and none after two rounds that did not improve on the best curve; the least violating
     curve is returned (footprint first, then curvature: the curvature is left to the
-    optimisation), pushed sideways off a road edge where it still comes too close
+    optimisation; a curve beyond the bands counts after both), pushed sideways off a road
+    edge where it still comes too close
     (:func:`_push`; its rounds count as repair rounds).
 
     Returns the curve, the rounds, the number of control points doubled and the curve's
@@ -215,7 +243,7 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
     # the candidates' stations: blended by the basis, they estimate the samples' stations,
     # which the footprint check refines (no nearest-point search per sample)
     pool_s = checker.stations(pool)
-    best: tuple[tuple[float, float], _Curve, int, int, tuple[FloatArray, ...]] | None = None
+    best: tuple[tuple[float, float, float], _Curve, int, int, tuple[FloatArray, ...]] | None = None
     while True:
         pool_idx = np.repeat(np.arange(n_pool), counts)
         curve = _Curve.build(pool[pool_idx], pool_idx, params.degree, params.sample_spacing)
@@ -223,14 +251,17 @@ def _refine(pool: FloatArray, counts: NDArray[np.int64], checker: _Checker,
         slack, sc = checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]),
                                   curve.combine(pool_s[pool_idx]))
         kmax = float(np.abs(curvature_from_derivatives(d1, d2)).max())
-        # violation: footprint [m] inside the margin, then curvature beyond the limit
-        score = (max(-float(slack.min()), 0.0), max(kmax - params.kappa_max, 0.0))
+        over = band_excess(checker, pos, sc, band)
+        # violation: footprint [m] inside the margin, then curvature beyond the limit,
+        # then the separation given away
+        score = (max(-float(slack.min()), 0.0), max(kmax - params.kappa_max, 0.0),
+                 float(np.round(over.max(), 3)))
         if best is None or score < best[0]:
             best = (score, curve, rounds, doubled, (pos, d1, d2, slack, sc))
             stall = 0
         else:
             stall += 1
-        bad = np.flatnonzero(slack < 0)
+        bad = np.flatnonzero((slack < 0) | (over > BAND_TOL))
         if len(bad) == 0 or rounds >= params.repair_rounds or stall >= 2:
             break
         add, dup = _repair_marks(bad, curve.first, pool_idx, counts, pool, pos, curve.k)

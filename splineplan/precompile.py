@@ -71,6 +71,7 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
                            f8),),
         "_bent_kernel": ((F1,) * 5,),
         "_search_kernel": ((i8, I1, I1, F1, I1, F1, I1, i8, f8),),
+        "_place_kernel": (((F1,) * 7 + (B1,) + (f8,) * 9),),
     }),
     "splineplan.control_polygon": (4.2, {
         "_bending_system": ((F2, F2, F1, f8),),

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import logging
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
@@ -62,6 +62,17 @@ class RoadmapParams:
         Ego dimensions [m].
     segment_length
         Length [m] of the road segments a long route is cut into.
+    road_margin
+        Clearance [m] kept from the road edges, beyond the ego's half width: the road
+        edges are grown by ``vehicle_width / 2 + road_margin``. By default none, as level
+        3's ``TrajectoryParams.road_margin``: the paper asks that the vehicle stay on the
+        road, and a passage between an obstacle and the road's edge is one where it may.
+        Where the obstacles leave room, the chosen vertices keep ``safety_margin`` from the
+        road edges all the same (see :func:`place_vertices`).
+    lane_width
+        Width [m] of a lane (SUMO's default 3.2 m): a road ``w`` wide holds
+        ``round(w / lane_width)`` lanes (at least one), whose centres the chosen vertices
+        keep on a free road (see :func:`place_vertices`).
     """
 
     d: float = 1.0
@@ -70,11 +81,15 @@ class RoadmapParams:
     vehicle_length: float = 4.5
     vehicle_width: float = 1.8
     segment_length: float = 300.0
+    road_margin: float = 0.0
+    lane_width: float = 3.2
 
     def __post_init__(self) -> None:
-        for name in ("d", "wmax", "vehicle_length", "vehicle_width", "segment_length"):
+        for name in ("d", "wmax", "vehicle_length", "vehicle_width", "segment_length",
+                     "lane_width"):
             require_positive(f"RoadmapParams.{name}", getattr(self, name))
         require_non_negative("RoadmapParams.safety_margin", self.safety_margin)
+        require_non_negative("RoadmapParams.road_margin", self.road_margin)
         if self.segment_length < 2 * self.d:
             raise ParameterError(
                 f"RoadmapParams.d ({self.d:g} m) must be at most half of "
@@ -82,8 +97,22 @@ class RoadmapParams:
 
     @property
     def inflation(self) -> float:
-        """How far [m] obstacles and road edges are grown: half width plus margin."""
+        """How far [m] obstacles are grown: half width plus the safety margin."""
         return self.vehicle_width / 2.0 + self.safety_margin
+
+    @property
+    def road_inflation(self) -> float:
+        """How far [m] the road edges are grown: half width plus the road margin."""
+        return self.vehicle_width / 2.0 + self.road_margin
+
+    @property
+    def enough_separation(self) -> float:
+        """Separation [m] of a vertex from the grown obstacles beyond which more counts
+        as no better: what a car keeps from a car in the next lane when both keep their
+        lanes' centres (``lane_width - vehicle_width``, less the safety margin that the
+        growth holds), at most ``wmax / 2`` (the paper's threshold, for one side)."""
+        return float(min(max(self.lane_width - self.vehicle_width - self.safety_margin, 0.0),
+                         self.wmax / 2.0))
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,6 +155,11 @@ class Roadmap:
         ``(m - 1, 2, 2)`` [m]: for each step of the chosen path, a free straight link
         ``p -> q`` from the first vertex's sweep line to the next one's (see
         :attr:`passage_xy`).
+    band_lo, band_hi
+        ``(m,)`` [m]: lateral offsets between which level 3's control polygon may cross
+        each chosen vertex's sweep line without coming nearer the obstacles than the
+        vertex (nor leaving the vertex's lane where it keeps a lane's centre); see
+        :func:`place_vertices`. Empty: within the free intervals.
     """
 
     xy: FloatArray
@@ -148,6 +182,8 @@ class Roadmap:
     params: RoadmapParams
     arc_direct: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=bool))
     links: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    band_lo: FloatArray = field(default_factory=lambda: np.zeros(0))
+    band_hi: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def passage_xy(self) -> FloatArray:
@@ -166,6 +202,15 @@ class Roadmap:
         keep = np.concatenate(([True], np.hypot(*np.diff(pts, axis=0).T) > 1e-9))
         return np.asarray(pts[keep])
 
+    def at_midpoints(self) -> Roadmap:
+        """The same path with its vertices at their free intervals' midpoints (the paper's
+        vertices) and no bands."""
+        path = np.asarray(self.path)
+        xy = np.asarray(self.graph_xy)[path]
+        return replace(self, xy=xy, l=np.asarray(self.graph_l)[path],
+                       length=float(np.hypot(*np.diff(xy, axis=0).T).sum()),
+                       band_lo=np.zeros(0), band_hi=np.zeros(0))
+
     @property
     def bottleneck_s(self) -> float:
         """Station [m] of the narrowest vertex on the chosen path."""
@@ -183,7 +228,8 @@ def plan_roadmap(
     Sweep lines stand at stations ``0, d, 2d, ...`` and at the corridor's end; each is the
     straight segment along the reference line's normal between the road boundaries. Its
     free intervals are the points at least ``params.inflation`` [m] from every obstacle and
-    from both road edges (lateral offset within ``[right + inflation, left - inflation]``).
+    ``params.road_inflation`` [m] from both road edges (lateral offset within
+    ``[right + road_inflation, left - road_inflation]``).
     A vertex stands at each interval's midpoint. An arc joins vertices ``a`` and ``b`` of
     consecutive lines when the vehicle (a point in the grown configuration space) can pass
     from ``a`` to ``b``: along ``a``'s line inside its free interval, across a straight
@@ -197,7 +243,10 @@ def plan_roadmap(
     chosen path with its links: a collision-free polyline.
 
     The search maximises ``min(bottleneck width, wmax)``, then minimises length, exactly
-    (dynamic programming over the sweep lines, which form a layered acyclic graph).
+    (dynamic programming over the sweep lines, which form a layered acyclic graph). The
+    chosen path's vertices then move within their intervals to keep the separation from
+    the obstacles and the lane's centre (:func:`place_vertices`); ``graph_xy`` keeps the
+    midpoints.
 
     Parameters
     ----------
@@ -273,7 +322,7 @@ def _plan(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float
     stations = _stations(corridor.length, params.d)
     first = min(int(np.searchsorted(stations, s0 - 1e-9, side="left")), len(stations) - 1)
     stations = stations[first:]
-    lines = _sweep_lines(corridor, stations, r, keep_from=keep_from)
+    lines = _sweep_lines(corridor, stations, params.road_inflation, keep_from=keep_from)
     iv_line, iv_lo, iv_hi = _free_intervals(lines, obstacles, r)
     nline = len(stations)
     mid = (iv_lo + iv_hi) / 2.0
@@ -293,18 +342,203 @@ def _plan(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float
         raise AssertionError  # unreachable: _raise_blocked raises
     pw = width[path]
     k = int(np.argmin(pw))
-    seg = np.diff(vxy[path], axis=0)
+    lat, band_lo, band_hi = place_vertices(corridor, lines, iv_line[path], iv_lo[path],
+                                           iv_hi[path], l0, params)
+    pline = iv_line[path]
+    pxy = lines.center[pline] + lat[:, None] * lines.normal[pline]
+    seg = np.diff(pxy, axis=0)
     out = Roadmap(
-        xy=vxy[path], s=stations[iv_line[path]], l=mid[path], width=pw,
+        xy=pxy, s=stations[pline], l=lat, width=pw,
         bottleneck_width=float(pw[k]), bottleneck_index=k,
         length=float(np.hypot(seg[:, 0], seg[:, 1]).sum()),
         graph_xy=vxy, graph_s=stations[iv_line], graph_l=mid, graph_width=width,
         graph_line=iv_line, graph_lo=iv_lo, graph_hi=iv_hi, arcs=arcs, path=path,
         start_xy=start, params=params, arc_direct=graph.direct, links=graph.link[steps],
+        band_lo=band_lo, band_hi=band_hi,
     )
     logger.debug("roadmap: %d lines, %d vertices, %d arcs, bottleneck %.2f m at s=%.1f m",
                  nline, len(vxy), len(arcs), out.bottleneck_width, out.bottleneck_s)
     return out
+
+
+# -- where the chosen vertices stand -----------------------------------------------------
+#: Largest lateral change [m per m of station] by which a vertex's offset follows the
+#: separation that a vertex ahead or behind must keep (:func:`place_vertices`): a lane
+#: change over 16 m.
+PLACE_RATE = 0.2
+#: Room [m] that the offset of most separation from the obstacles leaves to a road edge's
+#: end of the interval (the footprint's turns and the curve's rounding need some).
+PLACE_ROAD_RESERVE = 0.1
+#: Stretch [m] before and after a vertex over which its separation from the obstacles
+#: holds (:func:`place_vertices`): a cubic B-spline rounds the corner where the vertices
+#: reach that offset, and the rounding must lie off the obstacle's side.
+PLACE_HOLD = 4.0
+#: Share of a vertex's separation from the obstacles (beyond the grown obstacles) that its
+#: band keeps: the rest may go to a control polygon with fewer, straighter legs.
+BAND_KEEP = 0.9
+
+
+def place_vertices(corridor: Corridor, lines: _Lines, line: NDArray[np.int64],
+                   lo: FloatArray, hi: FloatArray, l0: float, params: RoadmapParams
+                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Lateral offsets ``(m,)`` [m] of the chosen path's vertices in their free intervals
+    ``lo..hi`` ``(m,)`` on sweep lines ``line``, and the bands ``(m,)``, ``(m,)`` [m] of
+    :attr:`Roadmap.band_lo`, ``band_hi``.
+
+    The paper's separation is from obstacles and road edges alike, its threshold
+    ``wmax`` making widths beyond it equal; a midpoint between a parked car and the kerb
+    keeps half of what the car could keep from the car, and a midpoint of an empty
+    two-lane road is the lane line. So each vertex stands, in this order of priority:
+
+    1. as far from the obstacles (the interval's ends that an obstacle sets, not the
+       road) as the interval allows, up to :attr:`RoadmapParams.enough_separation`;
+    2. among those offsets, as far from the road edges (the ends the road or the keep
+       offsets set) as they allow, up to the safety margin beyond the road margin;
+    3. among those, nearest the centre of the route's lane: the lane the vehicle is in
+       (nearest ``l0`` [m]) or the one it changed to when that lane's centre was not
+       among them, the lane centre nearest it that is. Lanes are ``lane_width`` wide
+       across the corridor. In a junction (between two edges' own stretches) lanes do not
+       count: the offset of the lane it came from, as near as step 2 allows (the middle of
+       step 2's offsets where the path starts in the junction).
+
+    The band of a vertex is the set of step 1 (the control polygon may trade the road's
+    separation, not the obstacles'), narrowed to the lane (the footprint inside it)
+    where the vertex keeps a lane's centre.
+    """
+    right, left = corridor.bounds_at(lines.station[line])
+    junction = np.zeros(len(line), dtype=np.bool_)
+    ends, starts = corridor.edge_ends, corridor.edge_starts
+    if len(ends) > 1:
+        st = lines.station[line]
+        i = np.searchsorted(starts, st, side="right") - 1
+        nxt = np.minimum(i + 1, len(starts) - 1)
+        junction = (i >= 0) & (i + 1 < len(starts)) & (st > ends[np.maximum(i, 0)]) & (
+            st < starts[nxt])
+    road_extra = max(params.safety_margin - params.road_margin, 0.0)
+    return _place_kernel(_f64(lines.station[line]), _f64(lo), _f64(hi), _f64(lines.lo[line]),
+                         _f64(lines.hi[line]), _f64(right), _f64(left), junction, float(l0),
+                         params.enough_separation, road_extra, float(params.lane_width),
+                         float(params.vehicle_width),
+                         PLACE_RATE, PLACE_HOLD, PLACE_ROAD_RESERVE, BAND_KEEP)
+
+
+@njit(cache=True)
+def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: FloatArray,
+                  road_hi: FloatArray, right: FloatArray, left: FloatArray,
+                  junction: NDArray[np.bool_], l0: float, enough: float, road_extra: float,
+                  lane_width: float, vehicle_width: float, rate: float, hold: float,
+                  road_reserve: float, keep: float
+                  ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
+    """:func:`place_vertices` along the path (``st``: the lines' stations; ``road_lo``,
+    ``road_hi``: the lines' bounds from the road or keep offsets; ``right``, ``left``:
+    the road's edges, for the lanes; ``road_extra`` [m]: step 2's cap; ``vehicle_width``
+    [m]: for the band in a lane, which keeps the footprint inside it; ``rate``,
+    ``hold``, ``road_reserve``, ``keep``: :data:`PLACE_RATE`, :data:`PLACE_HOLD`,
+    :data:`PLACE_ROAD_RESERVE`, :data:`BAND_KEEP`)."""
+    m = len(lo)
+    out = np.empty(m)
+    b_lo = np.empty(m)
+    b_hi = np.empty(m)
+    at_lane = np.zeros(m, dtype=np.bool_)
+    lane_tol = np.zeros(m)
+    sep = np.empty(m)
+    pref = np.nan
+    for j in range(m):
+        a, b = lo[j], hi[j]
+        obs_lo = a > road_lo[j] + 1e-6
+        obs_hi = b < road_hi[j] - 1e-6
+        w = max(b - a, 0.0)
+        # step 1: the obstacles' separation
+        if obs_lo and obs_hi:
+            t = min(w / 2.0, enough)
+            a1, b1 = a + t, b - t
+        elif obs_lo:
+            t = min(max(w - road_reserve, 0.0), enough)
+            a1, b1 = a + t, b
+        elif obs_hi:
+            t = min(max(w - road_reserve, 0.0), enough)
+            a1, b1 = a, b - t
+        else:
+            a1, b1 = a, b
+            t = enough
+        sep[j] = t
+        if b1 < a1:
+            a1 = b1 = 0.5 * (a1 + b1)
+        # step 2: the road's
+        if not obs_lo and not obs_hi:
+            t = min((b1 - a1) / 2.0, road_extra)
+            a2, b2 = a1 + t, b1 - t
+        elif not obs_lo:
+            t = min(b1 - a1, road_extra)
+            a2, b2 = a1 + t, b1
+        elif not obs_hi:
+            t = min(b1 - a1, road_extra)
+            a2, b2 = a1, b1 - t
+        else:
+            a2, b2 = a1, b1
+        b_lo[j], b_hi[j] = a1, b1
+        if junction[j]:
+            # no lanes across a junction: on at the lane's offset, as far as it may
+            out[j] = min(max(pref if not np.isnan(pref) else 0.5 * (a2 + b2), a2), b2)
+            continue
+        # step 3: the route's lane
+        width = left[j] - right[j]
+        n = max(int(np.floor(width / lane_width + 0.5)), 1)
+        lw = width / n
+        if np.isnan(pref):
+            pref = l0
+        k = min(max(int(np.floor((pref - right[j]) / lw)), 0), n - 1)
+        c = right[j] + (k + 0.5) * lw
+        if not (a2 - 1e-9 <= c <= b2 + 1e-9):
+            # the lane centre among the offsets nearest the route's lane, if any
+            best = np.inf
+            for q in range(n):
+                cq = right[j] + (q + 0.5) * lw
+                if a2 - 1e-9 <= cq <= b2 + 1e-9 and abs(cq - c) < best:
+                    best = abs(cq - c)
+                    k = q
+            if np.isfinite(best):
+                c = right[j] + (k + 0.5) * lw
+        if a2 - 1e-9 <= c <= b2 + 1e-9:
+            pref = c
+            at_lane[j] = True
+            lane_tol[j] = max(lw - vehicle_width, 0.0) / 2.0
+        out[j] = min(max(c, a2), b2)
+    # the separation a vertex ahead or behind must reach bounds this one's offset by
+    # ``rate`` per metre between them, so that the vertices leave the lane in time
+    low, high = b_lo.copy(), b_hi.copy()
+    # each vertex's separation held over ``hold`` [m] before and after it
+    k0 = 0
+    for j in range(m):
+        while st[k0] < st[j] - hold:
+            k0 += 1
+        k = k0
+        while k < m and st[k] <= st[j] + hold:
+            low[j] = max(low[j], b_lo[k])
+            high[j] = min(high[j], b_hi[k])
+            k += 1
+    for j in range(1, m):
+        low[j] = max(low[j], low[j - 1] - rate * (st[j] - st[j - 1]))
+        high[j] = min(high[j], high[j - 1] + rate * (st[j] - st[j - 1]))
+    for j in range(m - 2, -1, -1):
+        low[j] = max(low[j], low[j + 1] - rate * (st[j + 1] - st[j]))
+        high[j] = min(high[j], high[j + 1] + rate * (st[j + 1] - st[j]))
+    for j in range(m):
+        if low[j] > high[j]:
+            # the separations ahead and behind ask for more than the rate allows: between
+            # them, within this vertex's own
+            v = min(max(0.5 * (low[j] + high[j]), b_lo[j]), b_hi[j])
+            low[j] = high[j] = v
+        low[j], high[j] = min(max(low[j], lo[j]), hi[j]), min(max(high[j], lo[j]), hi[j])
+        v = min(max(out[j], low[j]), high[j])
+        # the band: a share of the separation may go to a smoother polygon
+        give = (1.0 - keep) * sep[j]
+        b_lo[j], b_hi[j] = max(low[j] - give, lo[j]), min(high[j] + give, hi[j])
+        if at_lane[j] and abs(v - out[j]) < 1e-9:
+            b_lo[j] = max(b_lo[j], v - lane_tol[j])
+            b_hi[j] = min(b_hi[j], v + lane_tol[j])
+        out[j] = v
+    return out, b_lo, b_hi
 
 
 # -- construction of the graph ---------------------------------------------------------

@@ -15,9 +15,11 @@ Steps, and the choices beyond the paper:
    is ``l_k +- rho (hi_k - lo_k) / 2`` (``band_fraction`` rho). Greedy string pulling keeps,
    from the last kept vertex, the farthest vertex such that the straight segments to it
    cross every skipped sweep line inside its band
-   (:func:`~splineplan.control_polygon.band_simplify`): the control polygon keeps at
-   least ``1 - rho`` of each interval's separation, so the paper's separation is only
-   partly traded for fewer, straighter legs. rho = 0 only drops collinear vertices. Legs
+   (:func:`~splineplan.control_polygon.band_simplify`), within level 2's band
+   (:attr:`~splineplan.roadmap.Roadmap.band_lo`, ``band_hi``: 90 % of the vertex's
+   separation from the obstacles, and its lane where it keeps one's centre), so that the
+   separation is not traded for fewer, straighter legs. rho = 0 only drops collinear
+   vertices. Legs
    longer than ``max_control_spacing`` get extra control points on them, so that
    equation (3) has points to move on long straights.
 2. Lead-in: the first roadmap vertex used is the farthest that the vehicle's position
@@ -25,7 +27,9 @@ Steps, and the choices beyond the paper:
    distance ahead.
 3. Repair: a clamped B-spline cuts its polygon's corners (by about
    ``|P_{i-1} - 2 P_i + P_{i+1}| / 6`` for a cubic). Where the first curve's footprint is not
-   clear, the left-out roadmap vertex nearest the violation comes back; where none is left,
+   clear, or where it strays more than ``BAND_TOL`` beyond level 2's bands (the rounding
+   of a corner beside an obstacle), the left-out roadmap vertex nearest the violation
+   comes back; where none is left,
    the control point nearest it is doubled (repeated control points pull the curve onto
    the polygon); a few rounds, and the least violating curve is kept. Where it still comes
    within the margin of one road edge while the other leaves room (a lane's curve cutting
@@ -52,7 +56,9 @@ Steps, and the choices beyond the paper:
    Where neither control polygon (nor the detour, step 8) gives a feasible curve, the one
    returned is the least violating: footprint first, then curvature, as in step 3.
 7. Speed profile (:mod:`splineplan.speed`) along the final curve, sampled evenly in arc length.
-8. Detour: where the curve along level 2's path ends infeasible (the widest path can cross
+8. Where no feasible curve keeps level 2's bands, steps 1-7 run through the free
+   intervals' midpoints (:meth:`~splineplan.roadmap.Roadmap.at_midpoints`), the paper's
+   vertices. Detour: where the curve along level 2's path ends infeasible (the widest path can cross
    lanes faster than any curve within the turning limit), the same graph is searched for
    a path of limited lateral rate (:func:`~splineplan.control_polygon.detour_roadmap`)
    and steps 1-7 run along it; its curve is kept if it is feasible.
@@ -333,6 +339,25 @@ def plan_trajectory(
     obstacles = Obstacles.empty() if obstacles is None else obstacles
     if not polish:
         params = replace(params, max_iterations=0, repair_rounds=0)
+    traj = _plan_polygons(roadmap, corridor, obstacles, params, start_heading, start_speed,
+                          end_speed, polish)
+    if traj.feasible or not polish or len(roadmap.band_lo) != len(roadmap.s):
+        return traj
+    # no feasible curve keeps the separation of level 2's placed vertices: the curve
+    # through the free intervals' midpoints, without the bands, as the paper's
+    other = _plan_polygons(roadmap.at_midpoints(), corridor, obstacles, params, start_heading,
+                           start_speed, end_speed, polish)
+    log.debug("no feasible curve within level 2's bands; through the midpoints: %s",
+              other.feasible)
+    return _less_violating(traj, other, params)
+
+
+def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
+                   params: TrajectoryParams, start_heading: float | None,
+                   start_speed: float, end_speed: float | None, polish: bool
+                   ) -> Trajectory:
+    """:func:`plan_trajectory` along one placement of the roadmap's vertices: both control
+    polygons, then the detour."""
     smooth = _sharp_bend(roadmap, corridor, params)
     frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
@@ -405,7 +430,11 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
                                    smooth, frame=frame)
     checker = _Checker.build(corridor, obstacles, rp, pool, params.road_margin)
-    curve, refinements, doubled, samples = _refine(pool, counts, checker, params)
+    band = None
+    if len(roadmap.band_lo) == len(roadmap.s):
+        band = (np.asarray(roadmap.s, dtype=float), np.asarray(roadmap.band_lo, dtype=float),
+                np.asarray(roadmap.band_hi, dtype=float))
+    curve, refinements, doubled, samples = _refine(pool, counts, checker, params, band)
     opt = _Optimiser(curve, checker, params, samples)
     kappa_before = opt.kappa.copy()
     tried, accepted, refused, rounds = opt.run()

@@ -98,3 +98,18 @@ def test_route_corridor_round_trip_keeps_edges_and_junctions() -> None:
     np.testing.assert_array_equal(back.edge_ends, cor.edge_ends)
     mid = (cor.edge_ends[0] + cor.edge_starts[1]) / 2.0
     assert back.junction_at(mid) == cor.junction_at(mid) == cor.edges[:2]
+
+
+def test_a_plan_folder_written_before_the_roadmap_bands_reads(planned: object,
+                                                               tmp_path: Path) -> None:
+    plan = planned
+    save_plan(tmp_path, corridor=plan.corridor, obstacles=plan.map.obstacles,
+              roadmaps=plan.roadmaps, trajectory=plan.trajectory,
+              trajectory_params=TrajectoryParams())
+    doc = json.loads((tmp_path / "plan.json").read_text())
+    for r in doc["roadmaps"]:
+        del r["band_lo"], r["band_hi"]
+    (tmp_path / "plan.json").write_text(json.dumps(doc))
+    saved = load_plan(tmp_path)
+    assert [len(r.band_lo) for r in saved.roadmaps] == [0] * len(plan.roadmaps)
+    np.testing.assert_array_equal(saved.roadmaps[0].xy, plan.roadmaps[0].xy)

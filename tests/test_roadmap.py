@@ -19,9 +19,17 @@ from shapely.geometry import LineString, Polygon
 from splineplan.corridor import Corridor
 from splineplan.errors import GeometryError, ParameterError, RoadBlockedError
 from splineplan.obstacles import Obstacles
-from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
+from splineplan.roadmap import (
+    PLACE_HOLD,
+    Roadmap,
+    RoadmapParams,
+    plan_roadmap,
+)
 
-R_DEFAULT = RoadmapParams().inflation  # 1.2 m
+R_DEFAULT = RoadmapParams().inflation  # 1.2 m: obstacles
+R_ROAD = RoadmapParams().road_inflation  # 0.9 m: road edges
+#: Level 2 as the raster oracle sees it: road edges grown as much as the obstacles.
+EVEN = {"road_margin": RoadmapParams().safety_margin}
 
 
 # -- scenarios ---------------------------------------------------------------------------
@@ -88,8 +96,11 @@ def assert_consistent(rm: Roadmap) -> None:
     """Invariants of a result, re-derived from its own arrays."""
     m = len(rm.path)
     assert m == len(rm.xy) == len(rm.s) == len(rm.l) == len(rm.width)
-    np.testing.assert_allclose(rm.xy, rm.graph_xy[rm.path])
-    np.testing.assert_allclose(rm.l, (rm.graph_lo + rm.graph_hi)[rm.path] / 2)
+    np.testing.assert_allclose(rm.graph_l, (rm.graph_lo + rm.graph_hi) / 2)
+    # the placed vertices stand in their free intervals and bands
+    lo, hi = rm.graph_lo[rm.path], rm.graph_hi[rm.path]
+    assert np.all((lo - 1e-9 <= rm.l) & (rm.l <= hi + 1e-9))
+    assert np.all((rm.band_lo - 1e-9 <= rm.l) & (rm.l <= rm.band_hi + 1e-9))
     np.testing.assert_allclose(rm.width, (rm.graph_hi - rm.graph_lo)[rm.path])
     assert np.all(np.diff(rm.graph_line[rm.path]) == 1)
     assert rm.graph_line[rm.path[-1]] == rm.graph_line.max()
@@ -103,25 +114,41 @@ def assert_consistent(rm: Roadmap) -> None:
     assert len(rm.links) == m - 1 and len(rm.arc_direct) == len(rm.arcs)
 
 
-def assert_free(rm: Roadmap, obs: Obstacles, road: Polygon, r: float) -> None:
-    """The passage polyline keeps r from every obstacle and the road edge (shapely)."""
+def assert_free(rm: Roadmap, obs: Obstacles, road: Polygon, r: float,
+                r_road: float | None = None) -> None:
+    """The passage polyline keeps r from every obstacle and ``r_road`` (default: the
+    roadmap's road inflation) from the road edge (shapely)."""
+    r_road = rm.params.road_inflation if r_road is None else r_road
     line = LineString(rm.passage_xy) if len(rm.passage_xy) > 1 else shapely.Point(rm.xy[0])
     for poly in obs.polygons():
         assert line.distance(Polygon(poly)) >= r - 1e-6
     # 1 cm for the corridor's polyline approximation of curved boundaries
-    assert road.buffer(-(r - 0.01)).contains(line)
+    assert road.buffer(-(r_road - 0.01)).contains(line)
 
 
 # -- the paper's cases (Fig. 4) ----------------------------------------------------------
-@pytest.mark.parametrize(("left", "right"), [(4.8, -4.8), (6.0, -2.0), (3.0, -5.5)])
-def test_empty_road_runs_along_the_middle(left: float, right: float) -> None:
+@pytest.mark.parametrize(("left", "right", "lanes"),
+                         [(4.8, -4.8, 3), (6.0, -2.0, 3), (3.2, -3.2, 2), (6.4, -6.4, 4),
+                          (1.6, -1.6, 1)])
+def test_empty_road_keeps_the_centre_of_the_vehicles_lane(left: float, right: float,
+                                                           lanes: int) -> None:
+    """On an empty road of several lanes the path keeps the centre of the lane the vehicle
+    starts in, whichever lane that is (not the middle of the whole road: on two or four
+    lanes that is a lane line)."""
     corridor = straight(80.0, left, right)
-    rm = plan_roadmap(corridor, Obstacles.empty(), (0.0, 0.0))
-    assert_consistent(rm)
-    np.testing.assert_allclose(rm.l, (left + right) / 2, atol=1e-9)
-    np.testing.assert_allclose(rm.width, left - right - 2 * R_DEFAULT, atol=1e-9)
-    np.testing.assert_allclose(rm.s, np.arange(81.0))
-    assert rm.length == pytest.approx(80.0)
+    w = (left - right) / lanes
+    for k in range(lanes):
+        centre = right + (k + 0.5) * w
+        start = (0.0, centre + 0.3 * w * (-1) ** k)  # off the centre, within the lane
+        rm = plan_roadmap(corridor, Obstacles.empty(), start)
+        assert_consistent(rm)
+        np.testing.assert_allclose(rm.l, centre, atol=1e-9)
+        np.testing.assert_allclose(rm.width, left - right - 2 * R_ROAD, atol=1e-9)
+        np.testing.assert_allclose(rm.s, np.arange(81.0))
+        assert rm.length == pytest.approx(80.0)
+        # level 3 may not leave the lane: the bands keep the footprint inside it
+        assert np.all(rm.band_lo >= centre - (w - 1.8) / 2 - 1e-9)
+        assert np.all(rm.band_hi <= centre + (w - 1.8) / 2 + 1e-9)
 
 
 def test_empty_curved_road_runs_along_the_middle() -> None:
@@ -134,20 +161,31 @@ def test_empty_curved_road_runs_along_the_middle() -> None:
 
 
 @pytest.mark.parametrize("side", [1.0, -1.0])
-def test_one_obstacle_is_passed_on_the_wider_side_in_the_middle_of_the_gap(side: float) -> None:
+def test_one_obstacle_is_passed_on_the_wider_side_in_the_lane_beside_it(side: float) -> None:
+    """A car in the middle lane of three (9.6 m), a little to one side: the path passes on
+    the wider side, in the centre of the lane there, which keeps more than keeping a lane
+    beside a car needs (``enough_separation``), and stays in that lane."""
     corridor = straight(100.0)
     # a car at l = +-1 covers |l| in [0.1, 1.9]; grown by 1.2 it covers [-1.1, 3.1]
     obs = Obstacles.from_boxes([[40.0, side]], [0.0], [4.5], [1.8])
     rm = plan_roadmap(corridor, obs, (0.0, 0.0))
     assert_consistent(rm)
     beside = np.abs(rm.s - 40.0) <= 2.25 + R_DEFAULT - 0.01
-    wide_gap = (-3.6, -1.1) if side > 0 else (1.1, 3.6)
-    np.testing.assert_allclose(rm.l[rm.s == 40.0], np.mean(wide_gap), atol=1e-9)
-    assert np.all(np.sign(rm.l[beside]) == -side)
-    assert rm.bottleneck_width == pytest.approx(2.5)
+    wide_gap = (-4.8 + R_ROAD, -1.1) if side > 0 else (1.1, 4.8 - R_ROAD)
+    gap = rm.path[rm.s == 40.0]
+    np.testing.assert_allclose(rm.graph_l[gap], np.mean(wide_gap), atol=1e-9)
+    np.testing.assert_allclose(rm.l[beside], -3.2 * side, atol=1e-9)
+    assert rm.params.enough_separation <= 3.2 - 1.1
+    assert rm.bottleneck_width == pytest.approx(wide_gap[1] - wide_gap[0])
     assert abs(rm.bottleneck_s - 40.0) <= 2.25 + R_DEFAULT
-    # far from the obstacle the path is back in the middle of the road
-    np.testing.assert_allclose(rm.l[(rm.s < 30) | (rm.s > 50)], 0.0, atol=1e-9)
+    # well before the obstacle the path keeps the start's lane, the middle one; after it,
+    # the lane it changed to
+    np.testing.assert_allclose(rm.l[rm.s < 20], 0.0, atol=1e-9)
+    np.testing.assert_allclose(rm.l[rm.s > 45], -3.2 * side, atol=1e-9)
+    # the separation holds PLACE_HOLD ahead of the first sweep line (s = 38) that the
+    # obstacle's grown side bounds
+    held = (rm.s >= 38.0 - PLACE_HOLD) & (rm.s <= 40.0)
+    assert np.all(side * rm.l[held] <= -1.1 - rm.params.enough_separation + 1e-9)
     assert_free(rm, obs, open_road(corridor), R_DEFAULT)
 
 
@@ -168,8 +206,9 @@ def test_field_is_crossed_by_the_widest_passage_not_the_shortest() -> None:
     rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5))
     assert_consistent(rm)
     at_rows = (np.abs(rm.s - 42.0) <= 2.0) | (np.abs(rm.s - 62.0) <= 2.0)
-    np.testing.assert_allclose(rm.l[at_rows], (2.5 + 1.2 + 7.0 - 1.2) / 2, atol=1e-9)
-    assert rm.bottleneck_width == pytest.approx(2.1)
+    np.testing.assert_allclose(rm.graph_l[rm.path[at_rows]], (2.5 + 1.2 + 7.0 - R_ROAD) / 2,
+                               atol=1e-9)
+    assert rm.bottleneck_width == pytest.approx(7.0 - R_ROAD - 2.5 - 1.2)
     assert_free(rm, obs, open_road(corridor), R_DEFAULT)
 
 
@@ -178,16 +217,24 @@ def test_with_small_wmax_the_field_is_crossed_by_the_shortest_passage() -> None:
     rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=0.5))
     assert_consistent(rm)
     at_rows = (np.abs(rm.s - 42.0) <= 2.0) | (np.abs(rm.s - 62.0) <= 2.0)
-    np.testing.assert_allclose(rm.l[at_rows], 0.0, atol=1e-9)
+    np.testing.assert_allclose(rm.graph_l[rm.path[at_rows]], 0.0, atol=1e-9)
+    # separations beyond wmax / 2 count as equal
+    assert rm.params.enough_separation == pytest.approx(0.25)
+    assert np.all(np.abs(rm.l[at_rows]) <= 0.3 - 0.25 + 1e-9)
     assert rm.bottleneck_width == pytest.approx(0.6)
     wide = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5))
-    assert rm.length < wide.length
+
+    def searched(r: Roadmap) -> float:  # the length the search minimised (midpoints)
+        return float(np.hypot(*np.diff(r.graph_xy[r.path], axis=0).T).sum())
+
+    assert searched(rm) < searched(wide)
 
 
 def test_start_picks_the_interval_the_vehicle_is_in() -> None:
     corridor, obs = _gate_field()
     rm = plan_roadmap(corridor, obs, (43.0, 5.0), RoadmapParams(wmax=0.5))
-    assert rm.s[0] == 43.0 and rm.l[0] == pytest.approx(4.75)
+    assert rm.s[0] == 43.0
+    assert rm.graph_lo[rm.path[0]] <= 5.0 <= rm.graph_hi[rm.path[0]]
     # off the line: the first line at or ahead of the vehicle
     rm = plan_roadmap(corridor, obs, (42.3, 0.2))
     assert rm.s[0] == 43.0 and rm.l[0] == pytest.approx(0.0)
@@ -199,7 +246,7 @@ def test_links_make_a_free_passage_where_the_midpoint_segment_is_not() -> None:
     corridor = straight(100.0)
     for front in np.arange(30.0, 31.0, 0.05):
         obs = Obstacles.from_boxes([[front + 2.25, 0.5]], [0.0], [4.5], [1.8])
-        rm = plan_roadmap(corridor, obs, (0.0, 0.0))
+        rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(**EVEN))
         assert_consistent(rm)
         assert rm.bottleneck_width == pytest.approx(2.0)
         assert_free(rm, obs, open_road(corridor), R_DEFAULT)
@@ -232,7 +279,8 @@ def test_free_intervals_match_shapely_with_nonconvex_and_large_polygons() -> Non
     big = np.array([[22, -8.5], [30, -8.5], [30, 0.5], [22, 0.5]], float)  # wider than 2 r
     tri = np.array([[33, 3], [37, 5], [33.5, 7.5]], float)
     obs = Obstacles.from_polygons([u_shape, big, tri])
-    params = RoadmapParams(vehicle_width=1.0, safety_margin=0.2, d=0.5)  # r = 0.7
+    params = RoadmapParams(vehicle_width=1.0, safety_margin=0.2, d=0.5,
+                           road_margin=0.2)  # r = 0.7
     rm = plan_roadmap(corridor, obs, (0.0, 0.0), params)
     for k, s in enumerate(np.arange(0.0, 40.01, 0.5)):
         got = sorted(zip(rm.graph_lo[rm.graph_line == k], rm.graph_hi[rm.graph_line == k],
@@ -253,7 +301,7 @@ def test_free_intervals_match_shapely_with_nonconvex_and_large_polygons() -> Non
 def test_free_intervals_match_shapely_on_random_fields(seed: int, kind: str,
                                                         count: int) -> None:
     corridor, obs, start, _, _ = field(seed, kind, count, length=30.0, radius=25.0)
-    params = RoadmapParams(d=3.0)
+    params = RoadmapParams(d=3.0, **EVEN)
     try:
         rm = plan_roadmap(corridor, obs, start, params)
     except RoadBlockedError:
@@ -296,7 +344,7 @@ def exist_tol(d: float) -> float:
 
 def check_against_oracle(seed: int, kind: str, count: int, d: float, wmax: float) -> None:
     corridor, obs, start, road, goal = field(seed, kind, count)
-    params = RoadmapParams(d=d, wmax=wmax)
+    params = RoadmapParams(d=d, wmax=wmax, **EVEN)
     r = params.inflation
     margin = best_clearance(road, obs.polygons(), start, goal, step=H).best_clearance - r
     try:
@@ -314,7 +362,11 @@ def check_against_oracle(seed: int, kind: str, count: int, d: float, wmax: float
     assert min(rm.bottleneck_width, wmax) >= min(2 * (margin - RASTER_TOL), wmax) - 1e-9
     if np.all(rm.arc_direct[[np.flatnonzero((rm.arcs == (a, b)).all(axis=1))[0]
                              for a, b in zip(rm.path[:-1], rm.path[1:], strict=True)]]):
-        np.testing.assert_allclose(rm.passage_xy, rm.xy)
+        # the links are the midpoints' segments: from each placed vertex along its line
+        # to the midpoint, across, and along the next line
+        pts = rm.passage_xy
+        mids = rm.graph_xy[rm.path]
+        assert all(np.min(np.hypot(*(pts - q).T)) < 1e-9 for q in mids[1:-1])
 
 
 #: Random obstacle fields for the oracle tests: seed, road shape, obstacle count, d, wmax.
@@ -371,12 +423,12 @@ def test_blocked_by_two_staggered_rows_reports_the_dead_end() -> None:
 
 
 def test_narrow_road_without_room_for_the_vehicle_is_blocked() -> None:
-    corridor = straight(50.0, 1.0, -1.0)  # 2 m < 2.4 m grown vehicle
+    corridor = straight(50.0, 0.8, -0.8)  # 1.6 m < the vehicle's 1.8 m
     with pytest.raises(RoadBlockedError) as info:
         plan_roadmap(corridor, Obstacles.empty(), (0.0, 0.0))
     assert info.value.station == 0.0
-    # exactly as wide as the grown vehicle: one zero-width interval per line
-    rm = plan_roadmap(straight(50.0, 1.2, -1.2), Obstacles.empty(), (0.0, 0.0))
+    # exactly as wide as the vehicle with its road margins: one zero-width interval a line
+    rm = plan_roadmap(straight(50.0, R_ROAD, -R_ROAD), Obstacles.empty(), (0.0, 0.0))
     assert rm.bottleneck_width == 0.0
 
 
@@ -419,7 +471,7 @@ def test_start_inside_a_grown_obstacle_still_plans() -> None:
     corridor = straight(60.0)
     obs = Obstacles.from_boxes([[5.0, 1.5]], [0.0], [4.5], [1.8])
     rm = plan_roadmap(corridor, obs, (5.0, -0.5))  # 1.1 m from the car: inside r = 1.2
-    assert rm.s[0] == 5.0 and rm.l[0] == pytest.approx((-3.6 - 0.6) / 2)
+    assert rm.s[0] == 5.0 and rm.graph_l[rm.path[0]] == pytest.approx((-4.8 + R_ROAD - 0.6) / 2)
 
 
 def test_malformed_obstacles_raise() -> None:

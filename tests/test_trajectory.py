@@ -161,6 +161,9 @@ def test_slalom_every_round_keeps_the_footprint_clear() -> None:
     """Every intermediate curve that reports itself feasible is clear (shapely); rounds
     never sharpen the worst bend; the final curve is feasible."""
     road, obstacles, rm = slalom()
+    # one placement of the vertices (the midpoints): a roadmap with bands may fall back to
+    # the midpoints where it ends infeasible, and that changes with the moves allowed
+    rm = rm.at_midpoints()
     worst = np.inf
     for cap in (0, 1, 3, 10, 30, 100, 1000):
         tr = plan_trajectory(rm, road, obstacles, TrajectoryParams(max_iterations=cap), 0.0)
@@ -316,7 +319,7 @@ def test_curve_cutting_a_lane_corner_is_pushed_back_into_the_lane() -> None:
     cuts it to 0.25 m of the edge; the repair moves it sideways until the footprint keeps
     the margin (shapely), and without repair the curve stays infeasible."""
     corridor, lane = kinked_lane(42.0, 3.1)
-    rp = RoadmapParams()
+    rp = RoadmapParams(road_margin=0.3)
     tp = TrajectoryParams(road_margin=0.3)
     rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), rp)
     raw = plan_trajectory(rm, corridor, Obstacles.empty(), replace(tp, repair_rounds=0), 0.0)
@@ -598,7 +601,9 @@ def test_benchmark_fields_are_feasible(n_obs: int, seed: int) -> None:
     corridor, obstacles, start = obstacle_field(300, n_obs, 9.6, seed)
     rm, tr = real_plan(corridor, obstacles, start)
     assert tr.feasible
-    assert tr.iterations.control_points < 60
+    # far fewer than one per sweep line (300); level 2's bands keep 90 % of each vertex's
+    # separation, so more are kept than the 80 % bands around the midpoints kept (< 60)
+    assert tr.iterations.control_points < 120
     assert shapely_check_corridor(tr, corridor, obstacles, rm.params) == (0, 0)
 
 
