@@ -133,6 +133,17 @@ class Driver(Replanning, Control):
         self._set_route(route_corridor(self.net, route, vclass=ego.vclass), route.edges)
         self.route_length = route.length
 
+    def route_from_sumo(self) -> None:
+        """Plan the route (level 1) from where SUMO inserted the vehicle to its goal."""
+        from splineplan.network import route_corridor
+        from splineplan.route import shortest_route
+
+        ego = self.sc.ego
+        route = shortest_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
+                               start_pos=ego.start_pos)
+        self._set_route(route_corridor(self.net, route, vclass=ego.vclass), route.edges)
+        self.route_length = route.length
+
     def set_road(self, road: RoadCheck, polygons: Obstacles) -> None:
         """The road check (lanes and junction areas) and the obstacle polygons."""
         self.road = road
@@ -146,8 +157,10 @@ class Driver(Replanning, Control):
             goal_len - self.sc.sim.goal_margin, 0.0)
 
     # -- the loop's calls -------------------------------------------------------------------
-    def enter(self, now: float, front: FloatArray, heading: float) -> None:
-        """SUMO has just inserted the vehicle, its front bumper at ``front`` [m]."""
+    def enter(self, now: float, front: FloatArray, heading: float, speed: float = 0.0
+              ) -> None:
+        """SUMO has just inserted the vehicle, its front bumper at ``front`` [m], at
+        ``speed`` [m/s] (at most the planner's ``s_max``)."""
         self.in_sim = True
         self.status = "running"
         self.depart_time = now
@@ -156,7 +169,7 @@ class Driver(Replanning, Control):
             return
         self.sumo_front, self.sumo_heading = front, heading
         self._set_pose_from_sumo()
-        self.v = 0.0
+        self.v = min(speed, float(self.sc.trajectory.s_max)) if speed > 0.0 else 0.0
 
     def perceive(self, now: float, st: VehicleState, others: Others) -> None:
         """What SUMO says after a step: check where it put the vehicle, the safety checks,

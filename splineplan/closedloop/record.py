@@ -49,6 +49,9 @@ class SimResult:
         Columns of ``trajectory.csv``, as arrays.
     plans
         ``(time, roadmaps, trajectory, corridor window)`` of each successful plan (for plots).
+    vehicles
+        With several planned vehicles: each one's result by id (the run's own ``metrics``
+        are then ``summary.json``'s, ``driven`` and ``route`` empty).
     """
 
     status: str
@@ -59,10 +62,11 @@ class SimResult:
     route: tuple[str, ...]
     driven: dict[str, np.ndarray]
     plans: tuple[Any, ...] = field(default=(), repr=False)
+    vehicles: dict[str, SimResult] = field(default_factory=dict, repr=False)
 
     @property
     def arrived(self) -> bool:
-        """Whether the ego reached its goal."""
+        """Whether the ego (every planned vehicle) reached its goal."""
         return self.status == "arrived"
 
 
@@ -208,3 +212,65 @@ def write_csv(path: Path, cols: dict[str, np.ndarray]) -> None:
                 v = cols[name][i]
                 row.append(v if isinstance(v, str) else f"{float(v):.10g}")
             w.writerow(row)
+
+
+def run_summary(run: Any, results: dict[str, SimResult]) -> dict[str, Any]:
+    """``summary.json`` of a run with several planned vehicles."""
+    ms = [r.metrics for r in results.values()]
+    statuses: dict[str, int] = {}
+    for r in results.values():
+        statuses[r.status] = statuses.get(r.status, 0) + 1
+    n = len(results)
+    arrived = statuses.get("arrived", 0)
+    if run.status in ("failed", "interrupted"):
+        status = run.status
+    elif n and arrived == n:
+        status = "arrived"
+    elif any(r.status == "failed" for r in results.values()):
+        status = "failed"
+    else:
+        status = "timeout"
+    reason = run.reason or (f"{arrived} of {n} planned vehicles arrived"
+                            + "".join(f"; {k}: {v}" for k, v in sorted(statuses.items())
+                                      if k != "arrived"))
+    travel = [m["travel_time"] for m in ms if m["arrived"] and m["travel_time"] is not None]
+    gaps = [m["min_clearance_vehicles"] for m in ms if m["min_clearance_vehicles"] is not None]
+    plan_s = sum(float(m["wall_time_planner"]) for m in ms)
+    driven_s = sum(float(len(r.driven.get("t", ()))) * float(m["step_length"])
+                   for r, m in zip(results.values(), ms, strict=True))
+    return {
+        "scenario": run.sc.name,
+        "scenario_file": str(run.sc.path) if run.sc.path else None,
+        "status": status,
+        "reason": reason,
+        "seed": run.sc.sim.seed,
+        "selection": (None if run.selection is None else
+                      {"vehicles": list(run.selection.vehicles), "vtype": run.selection.vtype,
+                       "share": run.selection.share, "seed": run.selection.seed}),
+        "planned": n,
+        "statuses": statuses,
+        "arrived": arrived,
+        "vehicles": {vid: {"status": r.status, "reason": r.reason,
+                           "travel_time": r.metrics["travel_time"],
+                           "collisions": r.metrics["collisions"],
+                           "time_off_road": r.metrics["time_off_road"],
+                           "min_clearance_vehicles": r.metrics["min_clearance_vehicles"],
+                           "stuck": r.metrics.get("stuck")}
+                     for vid, r in results.items()},
+        "not_planned": dict(run.unplanned),
+        "collisions": sum(int(m["collisions"]) for m in ms),
+        "vehicles_off_road": sum(1 for m in ms if m["time_off_road"] > 0.0),
+        "time_off_road": sum(float(m["time_off_road"]) for m in ms),
+        "mean_travel_time_planned": (sum(travel) / len(travel)) if travel else None,
+        "min_clearance_planned_vehicles": min(gaps) if gaps else None,
+        "sumo_collision_reports": len(run.sumo_collisions),
+        "teleports": run.teleports,
+        "sim_time_end": run.time,
+        "wall_time": run.wall_time,
+        "wall_time_sumo": run.world.seconds,
+        "wall_time_planner": plan_s,
+        "real_time_factor": (run.time / run.wall_time) if run.wall_time > 0 else None,
+        # wall time per planned vehicle and simulated second it drove [s/s]
+        "wall_time_per_vehicle_second": (run.wall_time / driven_s) if driven_s > 0 else None,
+        "planned_vehicle_seconds": driven_s,
+    }

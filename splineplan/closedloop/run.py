@@ -37,6 +37,7 @@ from splineplan.closedloop.record import (
     vehicle_metrics,
     write_vehicle,
 )
+from splineplan.closedloop.select import Picker, Selection
 from splineplan.errors import (
     Interrupted,
     ParameterError,
@@ -70,8 +71,11 @@ def simulate(
     progress: bool | None = None,
     on_step: Callable[[float], None] | None = None,
     driver: DriverKind = "planner",
+    share: float | None = None,
+    vehicles: tuple[str, ...] = (),
+    vtype: str | None = None,
 ) -> SimResult:
-    """Run a scenario in SUMO with the planner driving the ego vehicle.
+    """Run a scenario in SUMO with the planner driving the ego vehicle(s).
 
     Parameters
     ----------
@@ -96,6 +100,13 @@ def simulate(
         :data:`LATERAL_RESOLUTION`, as for the planner). Nothing is teleported
         (``--time-to-teleport -1``): a SUMO driver stuck behind a blockage stands until the
         duration ends, and the run's status is ``timeout``, saying so.
+    share, vehicles, vtype
+        Also plan these of SUMO's own vehicles (:class:`~.select.Selection`): a share
+        [0, 1] of the departing passenger vehicles (drawn with ``seed``, default 0), the
+        vehicles of these ids, those of this type. Each is taken over where SUMO inserts
+        it, drives to its route's last edge and leaves there. With more than one planned
+        vehicle (or any of these), each has its own folder ``out_dir/<id>/`` and the run
+        writes ``summary.json``; the result's ``vehicles`` holds each one's result.
 
     Raises
     ------
@@ -114,12 +125,17 @@ def simulate(
     if driver not in DRIVERS:
         raise ParameterError(f"driver must be one of {', '.join(map(repr, DRIVERS))}, "
                              f"not {driver!r}")
+    selection = None
+    if share is not None or vehicles or vtype is not None or scenario.from_sumo:
+        selection = Selection(tuple(vehicles), vtype, 0.0 if share is None else share,
+                              0 if seed is None else seed)
     if gui:
         _check_display()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     run = _Run(scenario, out, kind=driver, gui=gui, on_step=on_step,
-               progress=_want_progress(progress))
+               progress=_want_progress(progress), selection=selection,
+               sumo_seed=seed is not None or not scenario.from_sumo)
     with _run_log(out / "run.log"):
         return _simulate(run, scenario, plot=plot)
 
@@ -154,22 +170,35 @@ class _Run:
     """State of one closed-loop run (internal): the world and the drivers."""
 
     def __init__(self, scenario: Scenario, out: Path, *, kind: DriverKind, gui: bool,
-                 on_step: Callable[[float], None] | None, progress: bool) -> None:
+                 on_step: Callable[[float], None] | None, progress: bool,
+                 selection: Selection | None = None, sumo_seed: bool = True) -> None:
         self.sc = scenario
         self.out = out
         self.kind = kind
         self.on_step = on_step
         self.progress = progress
+        self.selection = selection
+        self.picker = Picker(selection) if selection is not None else None
+        self.sumo_seed = sumo_seed
         self.world = World(gui=gui)
         self.dt = scenario.sim.step_length
         self.status = "running"
         self.reason = ""
         self.net: Any = None
-        self.drivers: list[Driver] = [Driver(scenario, None, kind=kind, out=out)]
+        #: one folder per vehicle and a summary, or the single ego's files in ``out``
+        self.multi = selection is not None or len(scenario.egos) > 1
+        self.drivers: list[Driver] = [
+            Driver(scenario.for_vehicle(e) if self.multi else scenario, None, kind=kind,
+                   out=_vehicle_dir(out, e.id) if self.multi else out)
+            for e in scenario.egos]
+        self.unplanned: dict[str, str] = {}  # SUMO vehicles chosen but not planned: why
         self.sumo_collisions: list[dict[str, Any]] = []
         self.teleports = 0  # of any vehicle
         self.wall_start = time.perf_counter()
         self.wall_time = 0.0
+        self._roads: dict[str, RoadCheck] = {}
+        self._junctions: list[Any] = []
+        self._polygons: Any = None
 
     @property
     def time(self) -> float:
@@ -181,10 +210,11 @@ class _Run:
         from splineplan.network import load_network
 
         sc = self.sc
-        ego = sc.ego
         for p in (sc.network, *sc.routes, *sc.additional):
             if not Path(p).is_file():
                 raise ScenarioError(f"{sc.name}: file not found: {p}")
+        if self.selection is not None:
+            self.selection.check(sc.routes)
         self.net = load_network(sc.network)
         for d in self.drivers:
             d.net = self.net
@@ -193,32 +223,60 @@ class _Run:
             from splineplan.planner import warm_up
 
             warm_up()  # the compiled loops, loaded before the loop rather than in a replan
-        road = RoadCheck(self.net, ego.vclass)
+        roads = {d.sc.ego.vclass: RoadCheck(self.net, d.sc.ego.vclass) for d in self.drivers}
         for p in (*sc.routes, *sc.additional):
             _check_xml(Path(p))
         self._start_sumo()
-        road.add_junctions(self.world.junction_shapes())
-        polygons = self.world.obstacle_polygons()
+        self._junctions = self.world.junction_shapes()
+        for road in roads.values():
+            road.add_junctions(self._junctions)
+        self._roads = roads
+        self._polygons = self.world.obstacle_polygons()
         for d in self.drivers:
-            d.set_road(road, polygons)
+            d.set_road(roads[d.sc.ego.vclass], self._polygons)
             self._add_vehicle(d)
+
+    def _road(self, vclass: str) -> RoadCheck:
+        if vclass not in self._roads:
+            road = RoadCheck(self.net, vclass)
+            road.add_junctions(self._junctions)
+            self._roads[vclass] = road
+        return self._roads[vclass]
 
     def _start_sumo(self) -> None:
         sc = self.sc
-        args = ["-n", str(sc.network),
-                "--step-length", f"{self.dt:g}", "--seed", str(sc.sim.seed),
-                "--collision.action", "warn", "--collision.check-junctions", "true",
-                "--time-to-teleport", "-1", *self._lateral_options(),
-                "--fcd-output", str(self.out / "fcd.xml"),
-                # everything SUMO says goes to sumo.log, nothing to the console: with
-                # --no-warnings, warnings reach only the error log (the same file)
-                "--log", str(self.out / "sumo.log"), "--error-log", str(self.out / "sumo.log"),
-                "--no-warnings", "true",
-                "--no-step-log", "true", "--duration-log.disable", "true"]
-        if sc.routes:
-            args += ["-r", ",".join(str(p) for p in sc.routes)]
-        if sc.additional:
-            args += ["-a", ",".join(str(p) for p in sc.additional)]
+        planned = bool(self.drivers) or (self.selection is not None
+                                         and not self.selection.empty)
+        if sc.from_sumo:
+            # SUMO's own scenario with its own options (teleports too); ours only add
+            # outputs and, where vehicles are planned, what they need
+            if sc.sumo_config is not None:
+                args = ["-c", str(sc.sumo_config)]
+            else:
+                args = ["-n", str(sc.network), "--step-length", f"{self.dt:g}"]
+            if self.sumo_seed:
+                args += ["--seed", str(sc.sim.seed)]
+            if planned:
+                args += ["--collision.action", "warn", "--collision.check-junctions", "true",
+                         *self._lateral_options()]
+        else:
+            args = ["-n", str(sc.network),
+                    "--step-length", f"{self.dt:g}", "--seed", str(sc.sim.seed),
+                    "--collision.action", "warn", "--collision.check-junctions", "true",
+                    "--time-to-teleport", "-1", *self._lateral_options()]
+        args += ["--fcd-output", str(self.out / "fcd.xml"),
+                 # everything SUMO says goes to sumo.log, nothing to the console: with
+                 # --no-warnings, warnings reach only the error log (the same file)
+                 "--log", str(self.out / "sumo.log"), "--error-log", str(self.out / "sumo.log"),
+                 "--no-warnings", "true",
+                 "--no-step-log", "true", "--duration-log.disable", "true"]
+        if self.multi:
+            args += ["--tripinfo-output", str(self.out / "tripinfo.xml")]
+        if sc.sumo_config is None:  # (a configuration names its own files)
+            if sc.routes:
+                args += ["-r", ",".join(str(p) for p in sc.routes)]
+            if sc.additional:
+                args += ["-a", ",".join(str(p) for p in sc.additional)]
         try:
             self.world.start(args, log_file=self.out / "sumo.log")
         except SumoError as err:
@@ -252,6 +310,7 @@ class _Run:
         sc = self.sc
         bar = _progress_bar(sc.sim.duration, sc.name) if self.progress else None
         steps = round(sc.sim.duration / self.dt)
+        open_ended = self.selection is not None
         try:
             with sigint_deferred() as ctrl_c:  # Ctrl-C stops between steps
                 for k in range(steps):
@@ -264,7 +323,8 @@ class _Run:
                         bar.update(10 * self.dt)
                     self._enter(events.departed)
                     self._observe_all(events.arrived)
-                    if all(d.status not in ("pending", "running") for d in self.drivers):
+                    if all(d.status not in ("pending", "running") for d in self.drivers) and (
+                            not open_ended or self.world.expected() == 0):
                         break
                 else:
                     for d in self.drivers:
@@ -285,10 +345,21 @@ class _Run:
                                 d.sc.ego.length, mv.speed)
             except SumoError as err:
                 if not self.world.present(d.ego):
-                    raise SimulationError(
-                        f"ego vehicle '{d.ego}' left the simulation at t={self.time:.1f} s "
-                        "(removed by someone else)") from err
+                    self._lost(d, err)
+                    continue
                 raise
+
+    def _lost(self, d: Driver, err: BaseException | None = None) -> None:
+        """A planned vehicle SUMO removed: an error for the single ego; with several, that
+        vehicle fails (saying so) and the others drive on."""
+        text = (f"ego vehicle '{d.ego}' left the simulation at t={self.time:.1f} s "
+                "(removed by someone else)")
+        if not self.multi:
+            raise SimulationError(text) from err
+        log.warning("%s", text)
+        d.fail(f"SimulationError: {text}")
+        d.in_sim = False
+        self.world.release(d.ego)
 
     def _step(self) -> Any:
         try:
@@ -306,9 +377,19 @@ class _Run:
             for d in self.drivers:
                 if d.ego in events.teleported:
                     d.teleports.append(self.time)
+                    if self.multi and d.in_sim:
+                        # SUMO moved it elsewhere: the plan no longer holds; SUMO drives it on
+                        text = (f"teleported by SUMO at t={self.time:.1f} s on lane "
+                                f"'{d.last_lane}' (its jam or collision rules)")
+                        log.warning("vehicle '%s' %s", d.ego, text)
+                        d.fail(text)
+                        d.in_sim = False
+                        self.world.release(d.ego)
         return events
 
     def _enter(self, departed: tuple[str, ...]) -> None:
+        if not departed:
+            return
         for d in self.drivers:
             if d.in_sim or d.depart_time is not None or d.ego not in departed:
                 continue
@@ -318,6 +399,44 @@ class _Run:
                                     remote=d.kind == "planner")
             front, heading = self.world.pose(d.ego)
             d.enter(self.time, front, heading)
+        if self.picker is None:
+            return
+        known = {d.ego for d in self.drivers}
+        for vid in departed:
+            if vid in known:
+                continue
+            edges, edge, pos, lane, type_id = self.world.route_of(vid)
+            vt = self.world.type_of(type_id)
+            if self.picker.picks(vid, type_id, vt["vclass"]):
+                self._adopt(vid, edges, edge, pos, lane, vt)
+
+    def _adopt(self, vid: str, edges: tuple[str, ...], edge: str, pos: float, lane: int,
+               vt: dict[str, Any]) -> None:
+        """Take over a vehicle SUMO has just inserted: its route's last edge is the goal."""
+        from splineplan.scenario import EgoSpec
+
+        sc = self.sc
+        try:
+            spec = EgoSpec(start_edge=edge, goal_edge=edges[-1], start_pos=pos,
+                           start_lane=lane, vclass=vt["vclass"], length=vt["length"],
+                           width=vt["width"], max_speed=vt["max_speed"], id=vid,
+                           depart=self.time)
+            d = Driver(sc.for_vehicle(spec), self.net, kind=self.kind,
+                       out=_vehicle_dir(self.out, vid))
+            d.route_from_sumo()
+        except SplineplanError as err:
+            self.unplanned[vid] = str(err)
+            log.warning("t=%.1f vehicle '%s' is left to SUMO: %s", self.time, vid, err)
+            return
+        self.world.set_route(vid, list(d.route_edges))
+        tp = d.sc.trajectory
+        self.world.take_control(vid, subscribe_range=sc.sim.lookahead + spec.length + 20.0,
+                                remote=d.kind == "planner",
+                                limits=(tp.a_max, tp.b_max, EMERGENCY_FACTOR * tp.b_max))
+        d.set_road(self._road(spec.vclass), self._polygons)
+        front, heading = self.world.pose(vid)
+        d.enter(self.time, front, heading, speed=self.world.speed(vid))
+        self.drivers.append(d)
 
     def _observe_all(self, arrived: tuple[str, ...]) -> None:
         for d in self.drivers:
@@ -328,8 +447,8 @@ class _Run:
                 continue
             st = self.world.state(d.ego)
             if st is None:
-                raise SimulationError(f"ego vehicle '{d.ego}' left the simulation at "
-                                      f"t={self.time:.1f} s (removed by someone else)")
+                self._lost(d)
+                continue
             d.perceive(self.time, st, self.world.around(d.ego, d.sc.sim.stopped_speed))
             if d.status == "arrived":
                 self.world.remove(d.ego)
@@ -366,9 +485,9 @@ class _Run:
         if self.world.sumo is not None and (self.world.started or self.status == "interrupted"):
             self.world.close()
         self.wall_time = time.perf_counter() - self.wall_start
-        results = [self._finish_driver(d) for d in self.drivers]
-        result = results[0]
-        if plot:
+        results = {d.ego: self._finish_driver(d) for d in self.drivers}
+        result = next(iter(results.values())) if not self.multi else self._summary(results)
+        if plot and not self.multi:
             try:
                 _plot(self, result)
             except Exception as err:
@@ -380,9 +499,24 @@ class _Run:
                            self.world.seconds, d.plan_seconds)
         driven = driven_columns(d.rows)
         metrics = vehicle_metrics(d, driven, totals)
-        write_vehicle(self.out, driven, metrics)
-        return SimResult(d.status, d.reason, self.out, metrics, tuple(d.replans),
+        out = d.out if d.out is not None else self.out
+        write_vehicle(out, driven, metrics)
+        return SimResult(d.status, d.reason, out, metrics, tuple(d.replans),
                          d.driven_before + d.route_edges, driven, tuple(d.plans))
+
+    def _summary(self, results: dict[str, SimResult]) -> SimResult:
+        from splineplan.closedloop.record import run_summary, write_json
+
+        summary = run_summary(self, results)
+        write_json(self.out / "summary.json", summary)
+        return SimResult(summary["status"], summary["reason"], self.out, summary, (), (),
+                         {}, (), vehicles=results)
+
+
+def _vehicle_dir(out: Path, vid: str) -> Path:
+    """A planned vehicle's folder in the run's (its id, made safe as a file name)."""
+    safe = "".join(c if c.isalnum() or c in "-_.#" else "_" for c in vid)
+    return out / (safe or "_")
 
 
 # ---- helpers ------------------------------------------------------------------------------

@@ -249,6 +249,7 @@ class World:
         """Stop the subscriptions of a vehicle (it left, or is no longer planned)."""
         with contextlib.suppress(Exception):
             self.sumo.vehicle.unsubscribe(vid)
+        with contextlib.suppress(Exception):
             self.sumo.vehicle.unsubscribeContext(vid, self.c.CMD_GET_VEHICLE_VARIABLE, 0.0)
 
     def pose(self, vid: str) -> tuple[FloatArray, float]:
@@ -340,7 +341,8 @@ class World:
             raise SumoError(f"SUMO refused the new route: {sumo_message(err)}") from err
 
     def remove(self, vid: str) -> None:
-        """Take a vehicle out of the simulation (never raises)."""
+        """Take a vehicle out of the simulation, with its subscriptions (never raises)."""
+        self.release(vid)
         with contextlib.suppress(Exception):
             self.sumo.vehicle.remove(vid)
 
@@ -366,6 +368,10 @@ class World:
             with contextlib.suppress(Exception):
                 out[vid] = v.getTypeID(vid)
         return out
+
+    def speed(self, vid: str) -> float:
+        """A vehicle's speed [m/s], read now."""
+        return float(self.sumo.vehicle.getSpeed(vid))
 
     def vehicle_ids(self) -> tuple[str, ...]:
         """The vehicles in the simulation now."""
