@@ -1,0 +1,554 @@
+"""Moving obstacles with a known future: the speed along a fixed path that keeps clear of them.
+
+The paper plans among static obstacles and leaves moving ones to future work; its authors'
+later work, and the prioritised scheme it names, treat a vehicle whose motion is known (a
+plan published by another planned vehicle, a CommonRoad dynamic obstacle, a prediction of a
+SUMO vehicle) as an obstacle in space and time. Here that is done speed first, in the usual
+path-velocity decomposition:
+
+1. **Occupancy.** For each obstacle and each time step, the stations of the path at which the
+   vehicle's rectangle would come closer than the margin to the obstacle's rectangle
+   (:func:`occupancy`: exact rectangle distances for the pairs a k-d tree leaves).
+2. **Pass or yield.** A forward pass in time drives as fast as the path's speed limit and the
+   acceleration limits allow while staying behind every obstacle it yields to, braking early
+   enough to stop behind it at any later time. Obstacles the fastest profile would touch are
+   yielded to, earliest touch first, until none is touched; the others are passed in front of
+   or never met.
+3. **Conflict.** Where even full braking cannot stay behind an obstacle (it comes towards the
+   vehicle, or it is already too close), speed alone cannot keep the margin: the result names
+   the obstacle, the time and the station (:class:`Conflict`), and
+   :meth:`Conflict.as_static` gives the obstacle's swept rectangles there for level 2 to plan
+   a new path around.
+
+All functions are pure; times are absolute [s] (a simulation clock), so plans made at
+different times compare.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
+
+from splineplan.errors import ParameterError
+from splineplan.geometry import FloatArray, wrap_angle
+from splineplan.obstacles import Obstacles
+from splineplan.speed import speed_profile
+from splineplan.trajectory import Trajectory, TrajectoryParams, _times, speed_limit
+
+#: Time step [s] of the occupancy and of the forward pass.
+DT = 0.1
+#: Longest time [s] a plan waits or looks ahead before it gives up on an obstacle.
+HORIZON = 120.0
+#: Time [s] before and after a conflict over which :meth:`Conflict.as_static` sweeps the
+#: obstacle.
+SWEEP = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class MovingObstacle:
+    """A vehicle whose future is known: its rectangle's centre and heading over time.
+
+    Attributes
+    ----------
+    id
+        Its name (a SUMO vehicle id, a CommonRoad obstacle id).
+    t
+        ``(n,)`` absolute times [s], strictly increasing.
+    xy, heading
+        ``(n, 2)`` centre [m] and ``(n,)`` heading [rad] at those times.
+    length, width
+        Its rectangle [m].
+    stays
+        Whether it stays at its last pose after ``t[-1]`` (a plan that ends before the
+        vehicle leaves); otherwise it is not there before ``t[0]`` nor after ``t[-1]``.
+    """
+
+    id: str
+    t: FloatArray
+    xy: FloatArray
+    heading: FloatArray
+    length: float
+    width: float
+    stays: bool = False
+
+    def __post_init__(self) -> None:
+        t = np.asarray(self.t, dtype=float).reshape(-1)
+        xy = np.asarray(self.xy, dtype=float).reshape(-1, 2)
+        head = np.asarray(self.heading, dtype=float).reshape(-1)
+        if len(t) == 0 or len(xy) != len(t) or len(head) != len(t):
+            raise ParameterError(f"moving obstacle {self.id!r}: t, xy and heading must have "
+                                 "the same, non-zero length")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(xy))
+                and np.all(np.isfinite(head))):
+            raise ParameterError(f"moving obstacle {self.id!r} has non-finite values")
+        if np.any(np.diff(t) <= 0):
+            raise ParameterError(f"moving obstacle {self.id!r}: times must increase")
+        if not (self.length > 0 and self.width > 0):
+            raise ParameterError(f"moving obstacle {self.id!r}: length and width must be "
+                                 "positive")
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "xy", xy)
+        object.__setattr__(self, "heading", np.unwrap(head))
+
+    @classmethod
+    def constant_velocity(cls, id: str, t0: float, xy: ArrayLike, heading: float,
+                          speed: float, length: float, width: float, *,
+                          horizon: float = 10.0, dt: float = 0.5) -> MovingObstacle:
+        """A vehicle predicted to keep its heading and speed [m/s] for ``horizon`` [s]."""
+        t = t0 + np.arange(0.0, horizon + dt / 2, dt)
+        d = np.array([math.cos(heading), math.sin(heading)])
+        pos = np.asarray(xy, dtype=float) + np.outer((t - t0) * speed, d)
+        return cls(id, t, pos, np.full(len(t), heading), length, width)
+
+    def at(self, times: ArrayLike) -> tuple[FloatArray, FloatArray, NDArray[np.bool_]]:
+        """Centre ``(m, 2)`` [m], heading ``(m,)`` [rad] and whether it is there, at
+        absolute ``times`` ``(m,)`` [s]."""
+        tt = np.asarray(times, dtype=float).reshape(-1)
+        there = (tt >= self.t[0]) & ((tt <= self.t[-1]) | self.stays)
+        x = np.interp(tt, self.t, self.xy[:, 0])
+        y = np.interp(tt, self.t, self.xy[:, 1])
+        return np.column_stack((x, y)), wrap_angle(np.interp(tt, self.t, self.heading)), there
+
+
+@dataclass(frozen=True, eq=False)
+class Conflict:
+    """Where and when speed alone cannot keep the margin from a moving obstacle.
+
+    Attributes
+    ----------
+    obstacle
+        The obstacle's id.
+    t, station
+        Absolute time [s] and station [m] along the path where the margin is first lost
+        even with full braking.
+    xy, heading
+        The obstacle's centre [m] and heading [rad] then.
+    """
+
+    obstacle: MovingObstacle
+    t: float
+    station: float
+    xy: FloatArray
+    heading: float
+
+    def as_static(self, sweep: float = SWEEP, step: float = 0.25) -> Obstacles:
+        """The obstacle's rectangles from ``sweep`` [s] before to ``sweep`` after the
+        conflict, every ``step`` [s], as static obstacles for level 2."""
+        times = self.t + np.arange(-sweep, sweep + step / 2, step)
+        xy, head, there = self.obstacle.at(times)
+        if not there.any():
+            xy, head = self.xy[None, :], np.array([self.heading])
+            there = np.array([True])
+        n = int(there.sum())
+        return Obstacles.from_boxes(xy[there], head[there], np.full(n, self.obstacle.length),
+                                    np.full(n, self.obstacle.width),
+                                    ids=[f"{self.obstacle.id}@{t:.2f}" for t in times[there]])
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedPlan:
+    """Result of :func:`speed_among`: the vehicle's progress along the path over time.
+
+    Attributes
+    ----------
+    t, s, v
+        ``(m,)`` absolute times [s] (steps of ``dt``, the last one where the path ends),
+        stations [m] (non-decreasing: equal while it waits) and speeds [m/s].
+    yielded
+        Ids of the obstacles it stays behind.
+    passed
+        Ids of the obstacles whose occupied stations it crosses before they arrive.
+    conflict
+        The first obstacle that it cannot keep the margin from by speed alone, or ``None``.
+    """
+
+    t: FloatArray
+    s: FloatArray
+    v: FloatArray
+    yielded: tuple[str, ...] = ()
+    passed: tuple[str, ...] = ()
+    conflict: Conflict | None = None
+
+    @property
+    def clear(self) -> bool:
+        """Whether the margin is kept from every moving obstacle."""
+        return self.conflict is None
+
+
+@dataclass(frozen=True, eq=False)
+class Occupancy:
+    """Stations of the path blocked by each obstacle at each time step.
+
+    Attributes
+    ----------
+    t
+        ``(m,)`` absolute times [s].
+    lo, hi
+        ``(k, m)`` lowest and highest station [m] at which the vehicle would come closer
+        than the margin to obstacle ``i`` at time ``t[j]``; ``nan`` where it would not.
+    """
+
+    t: FloatArray
+    lo: FloatArray
+    hi: FloatArray
+    obstacles: tuple[MovingObstacle, ...] = field(default=())
+
+
+def occupancy(s: ArrayLike, xy: ArrayLike, heading: ArrayLike, times: ArrayLike,
+              moving: Sequence[MovingObstacle], *, length: float, width: float,
+              margin: float) -> Occupancy:
+    """Where on the path (stations ``s`` ``(n,)`` [m], centres ``xy`` ``(n, 2)``, headings
+    ``(n,)``) each obstacle blocks a vehicle of ``length`` x ``width`` [m] at ``times`` [s].
+
+    Conservative by one sample and one time step on each side, so that the vehicle keeps
+    the margin between samples as well (the intervals are widened to the neighbouring
+    samples and joined over the neighbouring time steps).
+    """
+    st = np.asarray(s, dtype=float)
+    pts = np.asarray(xy, dtype=float).reshape(-1, 2)
+    head = np.asarray(heading, dtype=float)
+    tt = np.asarray(times, dtype=float)
+    k, m, n = len(moving), len(tt), len(st)
+    lo = np.full((k, m), np.nan)
+    hi = np.full((k, m), np.nan)
+    if k == 0 or m == 0 or n == 0:
+        return Occupancy(tt, lo, hi, tuple(moving))
+    tree = cKDTree(pts)
+    spacing = float(np.max(np.diff(st))) if n > 1 else 0.0
+    ego_r = math.hypot(length, width) / 2.0
+    for i, ob in enumerate(moving):
+        oxy, ohead, there = ob.at(tt)
+        js = np.flatnonzero(there)
+        if len(js) == 0:
+            continue
+        reach = ego_r + math.hypot(ob.length, ob.width) / 2.0 + margin + spacing
+        near = tree.query_ball_point(oxy[js], r=reach)
+        pj = np.repeat(js, [len(c) for c in near])
+        if len(pj) == 0:
+            continue
+        pi = np.concatenate([np.asarray(c, dtype=np.int64) for c in near])
+        hit = box_gap(pts[pi], head[pi], (length, width), oxy[pj], ohead[pj],
+                      (ob.length, ob.width)) < margin
+        if not hit.any():
+            continue
+        pj, pi = pj[hit], pi[hit]
+        lo_i = np.full(m, n, dtype=np.int64)
+        hi_i = np.full(m, -1, dtype=np.int64)
+        np.minimum.at(lo_i, pj, pi)
+        np.maximum.at(hi_i, pj, pi)
+        blocked = hi_i >= 0
+        # one time step either side, one sample either side
+        lo_w = np.minimum(lo_i, np.minimum(np.roll(lo_i, 1), np.roll(lo_i, -1)))
+        hi_w = np.maximum(hi_i, np.maximum(np.roll(hi_i, 1), np.roll(hi_i, -1)))
+        blocked_w = blocked | np.roll(blocked, 1) | np.roll(blocked, -1)
+        if m > 1:  # no wrap-around from the rolls
+            lo_w[0] = min(lo_i[0], lo_i[1])
+            lo_w[-1] = min(lo_i[-1], lo_i[-2])
+            hi_w[0] = max(hi_i[0], hi_i[1])
+            hi_w[-1] = max(hi_i[-1], hi_i[-2])
+            blocked_w[0] = blocked[0] | blocked[1]
+            blocked_w[-1] = blocked[-1] | blocked[-2]
+        lo[i, blocked_w] = st[np.clip(lo_w[blocked_w] - 1, 0, n - 1)]
+        hi[i, blocked_w] = st[np.clip(hi_w[blocked_w] + 1, 0, n - 1)]
+    return Occupancy(tt, lo, hi, tuple(moving))
+
+
+def box_gap(c1: FloatArray, h1: FloatArray, size1: tuple[float, float], c2: FloatArray,
+            h2: FloatArray, size2: tuple[float, float]) -> FloatArray:
+    """Distance [m] between oriented rectangles, 0 where they overlap: centres ``(N, 2)``
+    [m], headings ``(N,)`` [rad] and (length, width) [m] of each side.
+
+    Two disjoint convex polygons are closest at a corner of one of them, so the distance
+    is the smallest of the eight corner-to-rectangle distances (each in the rectangle's own
+    frame); rectangles that cross without a corner inside the other are caught by the
+    separating-axis test.
+    """
+    u1 = np.column_stack((np.cos(h1), np.sin(h1)))
+    u2 = np.column_stack((np.cos(h2), np.sin(h2)))
+    half1 = np.array(size1) / 2.0
+    half2 = np.array(size2) / 2.0
+    d = c2 - c1
+    gap = np.minimum(_corner_gap(-d, u2, u1, half1, half2), _corner_gap(d, u1, u2, half2, half1))
+    # separating axes: the four sides' directions
+    cos = np.abs(np.sum(u1 * u2, axis=1))
+    sin = np.abs(u1[:, 0] * u2[:, 1] - u1[:, 1] * u2[:, 0])
+    along1 = np.abs(np.sum(d * u1, axis=1))
+    across1 = np.abs(u1[:, 0] * d[:, 1] - u1[:, 1] * d[:, 0])
+    along2 = np.abs(np.sum(d * u2, axis=1))
+    across2 = np.abs(u2[:, 0] * d[:, 1] - u2[:, 1] * d[:, 0])
+    overlap = ((along1 <= half1[0] + half2[0] * cos + half2[1] * sin)
+               & (across1 <= half1[1] + half2[0] * sin + half2[1] * cos)
+               & (along2 <= half2[0] + half1[0] * cos + half1[1] * sin)
+               & (across2 <= half2[1] + half1[0] * sin + half1[1] * cos))
+    return np.where(overlap, 0.0, gap)
+
+
+def _corner_gap(d: FloatArray, u_from: FloatArray, u_to: FloatArray, half_to: FloatArray,
+                half_from: FloatArray) -> FloatArray:
+    """Smallest distance ``(N,)`` from the corners of the rectangles with axis ``u_from`` and
+    half sizes ``half_from``, centred at ``d`` from the others, to those others (axis
+    ``u_to``, half sizes ``half_to``)."""
+    v_from = np.column_stack((-u_from[:, 1], u_from[:, 0]))
+    v_to = np.column_stack((-u_to[:, 1], u_to[:, 0]))
+    best = np.full(len(d), np.inf)
+    for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+        p = d + (sx * half_from[0]) * u_from + (sy * half_from[1]) * v_from
+        qx = np.maximum(np.abs(np.sum(p * u_to, axis=1)) - half_to[0], 0.0)
+        qy = np.maximum(np.abs(np.sum(p * v_to, axis=1)) - half_to[1], 0.0)
+        best = np.minimum(best, np.hypot(qx, qy))
+    return best
+
+
+def speed_among(
+    s: ArrayLike,
+    xy: ArrayLike,
+    heading: ArrayLike,
+    v_limit: ArrayLike,
+    *,
+    t0: float,
+    v0: float,
+    moving: Sequence[MovingObstacle],
+    length: float,
+    width: float,
+    margin: float,
+    a_max: float,
+    d_max: float,
+    end_speed: float | None = None,
+    dt: float = DT,
+) -> SpeedPlan:
+    """Fastest progress along a fixed path that keeps ``margin`` [m] from every moving
+    obstacle: pass in front of it where the limits allow, else stay behind it.
+
+    Parameters
+    ----------
+    s, xy, heading, v_limit
+        The path: stations ``(n,)`` [m] from 0, centres ``(n, 2)`` [m], headings [rad] and
+        the speed limit [m/s] of its curve (see :func:`splineplan.trajectory.speed_limit`).
+    t0, v0
+        Absolute time [s] and speed [m/s] at the path's start.
+    moving
+        The obstacles.
+    length, width, margin
+        The vehicle's rectangle and the clearance [m] to keep.
+    a_max, d_max
+        Acceleration and braking limits [m/s^2].
+    end_speed
+        Speed at the path's end (0 stops there), ``None`` for as fast as allowed.
+    dt
+        Time step [s].
+    """
+    st = np.asarray(s, dtype=float)
+    lim = np.asarray(v_limit, dtype=float)
+    if a_max <= 0 or d_max <= 0 or dt <= 0:
+        raise ParameterError("a_max, d_max and dt must be positive")
+    cap = speed_profile(st, lim, a_max=a_max, b_max=d_max, start_speed=max(v0, 0.0),
+                        end_speed=end_speed)
+    free = _forward(st, cap, t0, float(cap[0]), dt, None, a_max, d_max)
+    if not moving:
+        return SpeedPlan(*free)
+    span = min(max(max(float(o.t[-1]) if not o.stays else t0 + HORIZON for o in moving),
+                   float(free[0][-1])), t0 + HORIZON) - t0
+    times = t0 + np.arange(0.0, span + dt, dt)
+    occ = occupancy(st, xy, heading, times, moving, length=length, width=width,
+                    margin=margin)
+    yielded: list[int] = []
+    conflict: Conflict | None = None
+    plan = free
+    for _ in range(len(moving) + 1):
+        wall, owner = _walls(occ, yielded, len(times))
+        plan = _forward(st, cap, t0, float(cap[0]), dt, wall, a_max, d_max)
+        conflict = _first_conflict(plan, occ, wall, owner, moving)
+        touched = _touched(plan, occ, exclude=yielded)
+        if not touched:
+            break
+        yielded.append(touched[0])
+    passed = [moving[i].id for i in range(len(moving))
+              if i not in yielded and _crossed(plan, occ, i)]
+    return SpeedPlan(*plan, tuple(moving[i].id for i in yielded), tuple(passed), conflict)
+
+
+def _walls(occ: Occupancy, yielded: list[int], m: int
+           ) -> tuple[FloatArray, NDArray[np.int64]]:
+    """The lowest station of the yielded obstacles at each time step, and whose."""
+    wall = np.full(m, np.inf)
+    owner = np.full(m, -1, dtype=np.int64)
+    for i in yielded:
+        lo = np.where(np.isnan(occ.lo[i]), np.inf, occ.lo[i])
+        better = lo < wall
+        wall[better], owner[better] = lo[better], i
+    return wall, owner
+
+
+def _forward(s: FloatArray, cap: FloatArray, t0: float, v0: float, dt: float,
+             wall: FloatArray | None, a_max: float, d_max: float
+             ) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Time steps of driving along ``s`` as fast as the speed cap (a profile over the
+    stations) allows, staying behind ``wall`` (a station per time step from ``t0``) with
+    room to brake behind every later wall. Returns times, stations and speeds; once no wall
+    lies ahead, the rest of the cap from the speed reached, timed at the path's stations."""
+    end = float(s[-1])
+    walls = np.full(1, np.inf) if wall is None else wall
+    m = len(walls)
+    # suffix minimum of the walls: a stop before it is safe against all of them
+    floor = np.minimum.accumulate(walls[::-1])[::-1]
+    steps_t, steps_s, steps_v = [t0], [0.0], [v0]
+    pos, vel = 0.0, v0
+    choices = (a_max, a_max / 2.0, 0.0, -d_max / 4.0, -d_max / 2.0, -d_max)
+    j = 0
+    while j < m and floor[j] < np.inf and pos < end - 1e-9:
+        j += 1
+        vmax = max(float(np.interp(pos, s, cap)), 0.0)
+        nv, npos = vel, pos
+        for a in choices:
+            nv = min(max(vel + a * dt, 0.0), vmax)
+            if a < 0 and vel + a * dt < 0:  # stops within the step
+                npos = pos + vel * vel / (-2.0 * a)
+            else:
+                npos = pos + (vel + nv) / 2.0 * dt
+            if j >= m or npos + nv * nv / (2.0 * d_max) < floor[j] or _brakes_behind(
+                    npos, nv, walls[j:], dt, d_max):
+                break
+        pos, vel = npos, nv  # full braking if nothing stays behind: the conflict shows
+        steps_t.append(t0 + j * dt)
+        steps_s.append(min(pos, end))
+        steps_v.append(vel)
+    t, st, v = np.asarray(steps_t), np.asarray(steps_s), np.asarray(steps_v)
+    if pos >= end - 1e-9:
+        if len(st) > 1 and st[-2] < end:  # the last step ends at the path's end
+            frac = (end - st[-2]) / max(pos - st[-2], 1e-12)
+            t[-1] = t[-2] + frac * dt
+        return t, st, v
+    # no wall ahead any more: the cap from here on
+    rest = s > pos + 1e-9
+    rs = np.concatenate(([pos], s[rest]))
+    rv = speed_profile(rs - pos, np.concatenate(([vel], cap[rest])), a_max=a_max,
+                       b_max=d_max, start_speed=vel)
+    rt = t[-1] + _times(rs, rv)
+    ok = np.isfinite(rt)
+    return (np.concatenate((t, rt[1:][ok[1:]])), np.concatenate((st, rs[1:][ok[1:]])),
+            np.concatenate((v, rv[1:][ok[1:]])))
+
+
+def _brakes_behind(pos: float, vel: float, wall: FloatArray, dt: float, d_max: float) -> bool:
+    """Whether braking fully from ``pos``, ``vel`` stays behind ``wall[j]`` at each later
+    step ``j`` (``wall[0]`` is now)."""
+    tau = np.arange(len(wall)) * dt
+    stop = vel / d_max
+    travel = np.where(tau < stop, vel * tau - d_max * tau * tau / 2.0, vel * vel / (2 * d_max))
+    return bool(np.all(pos + travel < wall))
+
+
+def _touched(plan: tuple[FloatArray, FloatArray, FloatArray], occ: Occupancy,
+             exclude: list[int]) -> list[int]:
+    """Obstacles whose blocked stations the plan is on at some time step, earliest first."""
+    t, s, _ = plan
+    where = _plan_stations(t, s, occ.t)
+    first = []
+    for i in range(len(occ.lo)):
+        if i in exclude:
+            continue
+        inside = (where >= occ.lo[i]) & (where <= occ.hi[i])
+        if inside.any():
+            first.append((int(np.argmax(inside)), i))
+    return [i for _, i in sorted(first)]
+
+
+def _crossed(plan: tuple[FloatArray, FloatArray, FloatArray], occ: Occupancy, i: int) -> bool:
+    """Whether the plan is ahead of obstacle ``i``'s blocked stations at some time."""
+    where = _plan_stations(plan[0], plan[1], occ.t)
+    return bool(np.any(where > occ.hi[i]))
+
+
+def _first_conflict(plan: tuple[FloatArray, FloatArray, FloatArray], occ: Occupancy,
+                    wall: FloatArray, owner: NDArray[np.int64],
+                    moving: Sequence[MovingObstacle]) -> Conflict | None:
+    """The first time step at which the plan reaches a wall it yields to."""
+    where = _plan_stations(plan[0], plan[1], occ.t)
+    bad = (where > wall + 1e-6) & (owner >= 0)
+    if not bad.any():
+        return None
+    j = int(np.argmax(bad))
+    ob = moving[int(owner[j])]
+    xy, head, _ = ob.at([occ.t[j]])
+    return Conflict(ob, float(occ.t[j]), float(where[j]), xy[0], float(head[0]))
+
+
+def _plan_stations(t: FloatArray, s: FloatArray, times: FloatArray) -> FloatArray:
+    """The plan's station at ``times`` (``inf`` once it has left the path)."""
+    out = np.interp(times, t, s)
+    return np.where(times > t[-1], np.inf, out)
+
+
+# ---- trajectories ----------------------------------------------------------------------------
+def retime(trajectory: Trajectory, moving: Sequence[MovingObstacle], params: TrajectoryParams,
+           *, t0: float, length: float, width: float, margin: float,
+           end_speed: float | None = None) -> tuple[Trajectory, SpeedPlan]:
+    """The same path with the speed of :func:`speed_among`: its times are from ``t0`` like
+    the trajectory's own (from 0); a wait is two samples at the same station."""
+    tr = trajectory
+    lim = speed_limit(tr.s, tr.curvature, params)
+    plan = speed_among(tr.s, tr.xy, tr.heading, lim, t0=t0, v0=float(tr.speed[0]),
+                       moving=moving, length=length, width=width, margin=margin,
+                       a_max=params.a_max, d_max=params.b_max, end_speed=end_speed)
+    return _with_plan(tr, plan, t0), plan
+
+
+def _with_plan(tr: Trajectory, plan: SpeedPlan, t0: float) -> Trajectory:
+    """``tr`` resampled at its own stations plus the stations where the plan waits, with the
+    plan's times and speeds (a trajectory that the plan leaves unfinished ends there)."""
+    t, s, v = plan.t - t0, plan.s, plan.v
+    stopped = (v <= 1e-9) & (np.arange(len(v)) > 0)
+    waits: list[tuple[float, float, float]] = []  # station, arrival, departure
+    j = 0
+    while j < len(v):
+        if stopped[j]:
+            k = j
+            while k + 1 < len(v) and v[k + 1] <= 1e-9:
+                k += 1
+            waits.append((float(s[j]), float(t[j]), float(t[k])))
+            j = k + 1
+        else:
+            j += 1
+    reached = float(s[-1])
+    keep = tr.s <= reached + 1e-9
+    stations = np.concatenate((tr.s[keep], [w[0] for w in waits for _ in (0, 1)]))
+    order = np.argsort(stations, kind="stable")
+    stations = stations[order]
+    # first time each station is reached; the departure time for a wait's second sample
+    moving_mask = np.concatenate(([True], np.diff(s) > 1e-12))
+    ts = np.interp(stations, s[moving_mask], t[moving_mask])
+    vs = np.interp(stations, s[moving_mask], v[moving_mask])
+    nkeep = int(keep.sum())
+    is_wait = order >= nkeep
+    wait_idx = order[is_wait] - nkeep
+    dep = np.array([w[2] for w in waits for _ in (0, 1)])
+    arr = np.array([w[1] for w in waits for _ in (0, 1)])
+    second = np.zeros(len(wait_idx), dtype=bool)
+    second[1::2] = True  # each wait's two samples are adjacent and in order
+    ts[is_wait] = np.where(second, dep[wait_idx], arr[wait_idx])
+    vs[is_wait] = 0.0
+    ts = np.maximum.accumulate(ts)
+    head = np.unwrap(tr.heading)
+
+    def at(a: FloatArray) -> FloatArray:
+        return np.asarray(np.interp(stations, tr.s, a))
+
+    return replace(
+        tr, t=ts, x=at(tr.x), y=at(tr.y), heading=wrap_angle(at(head)), speed=vs,
+        curvature=at(tr.curvature), s=stations, clearance_obstacles=at(tr.clearance_obstacles),
+        clearance_road=at(tr.clearance_road))
+
+
+def published(trajectory: Trajectory, *, id: str, t0: float, length: float, width: float,
+              stays: bool = False) -> MovingObstacle:
+    """A planned vehicle's trajectory (times from ``t0`` [s]) as others see it."""
+    t = t0 + np.asarray(trajectory.t, dtype=float)
+    ok = np.isfinite(t)
+    t, xy, head = t[ok], trajectory.xy[ok], trajectory.heading[ok]
+    keep = np.concatenate(([True], np.diff(t) > 1e-9))
+    return MovingObstacle(id, t[keep], xy[keep], head[keep], length, width, stays)
