@@ -68,6 +68,14 @@ class DriverState:
     traffic_after: float
     trigger_after: float
     others: Others
+    board: Any  # Mapping[str, cooperate.Published]: the plans published so far
+    priority: int
+    publish: bool
+    published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
+    waiting_for: tuple[str, ...]
+    why_slow: str
+    wait_replan_at: float
+    conflicts: list[dict[str, Any]]
     signals: Signals
     _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
     _pl: tuple[list[float], ...]

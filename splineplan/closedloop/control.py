@@ -52,6 +52,7 @@ class Control(Perception):
         """
         self.signals = signals
         if self.traj is None:
+            self.why_slow = f"no plan ({self.reason})" if self.reason else "no plan yet"
             return self._move()
         sc, ego = self.sc, self.sc.ego
         tp = sc.trajectory
@@ -60,6 +61,7 @@ class Control(Perception):
         u_next = self.u + self.v * dt + 0.5 * tp.a_max * dt * dt
         ps, px, py, ph, pv2 = self._pl
         v_plan = math.sqrt(max(_interp(u_next, ps, pv2), 0.0))
+        self.why_slow = ""
         v_cap, limited = self._gap_speed()
         if self.stop_at is not None:
             v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (self.stop_at - self.u), 0.0)))
@@ -68,6 +70,11 @@ class Control(Perception):
         # stop at the trajectory's end unless a new plan comes first
         v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (end - self.u), 0.0)))
         v_target = min(v_plan, v_cap)
+        if self.stop_at is not None and not self.why_slow:
+            self.why_slow = f"stopping before a blockage ({self.reason})"
+        if v_plan < v_cap and self.waiting_for:
+            self.why_slow = ("waiting for the published plan of "
+                             + ", ".join(f"'{v}'" for v in self.waiting_for))
         emergency = EMERGENCY_FACTOR * tp.b_max
         v_new = min(max(v_target, self.v - emergency * dt), self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
@@ -143,8 +150,14 @@ class Control(Perception):
                 gap = full_s[first] - base
                 rel = math.cos(float(o.head[j]) - full_h[first])
                 v_l = max(float(o.speed[j]) * rel, 0.0)
-                cap = min(cap, safe_speed(gap, v_l, tp.b_max, sim.time_gap))
-        cap = min(cap, self._red_light_speed(), self._yield_speed())
+                c = safe_speed(gap, v_l, tp.b_max, sim.time_gap)
+                if c < cap:
+                    cap, self.why_slow = c, f"keeping its gap to vehicle '{o.ids[j]}' ahead"
+        red, give = self._red_light_speed(), self._yield_speed()
+        if red < cap:
+            cap, self.why_slow = red, "stopping at a red light"
+        if give < cap:
+            cap = give  # (why_slow set by _yield_speed)
         return cap, int(math.isfinite(cap))
 
     def _red_light_speed(self) -> float:
@@ -199,7 +212,11 @@ class Control(Perception):
             if self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * room:
                 continue  # cannot stop before the area, even braking hard: clear it
             # a comfortable stop, one step early
-            cap = min(cap, math.sqrt(max(2.0 * tp.b_max * (room - self.v * self.dt), 0.0)))
+            c = math.sqrt(max(2.0 * tp.b_max * (room - self.v * self.dt), 0.0))
+            if c < cap:
+                cap = c
+                self.why_slow = (f"giving way at a junction to vehicle '{foe.id}', as "
+                                 "SUMO's right of way says")
         return cap
 
     def _time_along_plan(self, dist: float) -> float:

@@ -10,7 +10,9 @@ Its perception, replanning and control are the mixins of :mod:`.perception`,
 
 from __future__ import annotations
 
+import logging
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, Literal, get_args
 
@@ -32,6 +34,12 @@ from splineplan.traffic import NO_OTHERS, Others, RoadCheck
 #: lane to pass an obstacle: ``--lateral-resolution`` :data:`LATERAL_RESOLUTION`).
 DriverKind = Literal["planner", "sumo", "sublane"]
 DRIVERS: tuple[str, ...] = get_args(DriverKind)
+#: A vehicle standing (slower than :data:`STANDING_SPEED` [m/s]) this long [s] is stuck:
+#: its metrics and the log say why (what its speed control waits for).
+STUCK_AFTER = 30.0
+STANDING_SPEED = 0.1
+
+log = logging.getLogger(__name__)
 
 
 class Driver(Replanning, Control):
@@ -93,6 +101,16 @@ class Driver(Replanning, Control):
         self.traffic_after = 0.0  # no traffic replan before this time [s]
         self.trigger_after = 0.0  # no obstacle or traffic check before this time [s]
         self.others = NO_OTHERS
+        self.board: Mapping[str, Any] = {}  # the plans others published (the run's board)
+        self.priority = 0  # lower plans first (the order of entering)
+        self.publish = False  # whether it publishes its plans (several planned vehicles)
+        self.published_plan: Any = None
+        self.waiting_for: tuple[str, ...] = ()
+        self.wait_replan_at = 0.0
+        self.conflicts: list[dict[str, Any]] = []
+        self.why_slow = ""  # what holds the vehicle back (speed control), in words
+        self.stand_since: float | None = None
+        self.stuck: list[dict[str, Any]] = []  # stands longer than STUCK_AFTER
         self._beside_at: tuple[float, float] | None = None
         self._cand_at: tuple[float, float] | None = None
         self._lane_of: tuple[str, int] = ("", 0)  # the last lane's id and index
@@ -205,11 +223,33 @@ class Driver(Replanning, Control):
         self.rows.append((self.time, x, y, h, self.v, self.station, float(sl[1]), lane,
                           float(fx), float(fy), pos_err, clear_obs, clear_veh, int(off_road),
                           self.limited))
+        self._watch_standing(now)
         if self.station >= self.goal_station:
             self.status = "arrived"
             self.reason = (f"front bumper reached the goal on edge '{ego.goal_edge}' at "
                            f"t={self.time:.1f} s")
             self.in_sim = False
+
+    def _watch_standing(self, now: float) -> None:
+        """Deadlock watch: a vehicle standing for :data:`STUCK_AFTER` seconds says why
+        (its ``stuck`` record and the log), once per stand."""
+        if self.v >= STANDING_SPEED:
+            if self.stuck and self.stuck[-1]["until"] is None:
+                self.stuck[-1]["until"] = now
+            self.stand_since = None
+            return
+        if self.stand_since is None:
+            self.stand_since = now
+            return
+        if now - self.stand_since < STUCK_AFTER or (
+                self.stuck and self.stuck[-1]["until"] is None):
+            return
+        why = self.why_slow or ("at the end of its plan, waiting for a new one"
+                                if self.kind == "planner" else "SUMO's driver stands")
+        self.stuck.append({"since": self.stand_since, "until": None, "lane": self.last_lane,
+                           "station": self.station, "why": why})
+        log.warning("t=%.1f vehicle '%s' has not moved for %.0f s on lane '%s': %s", now,
+                    self.ego, now - self.stand_since, self.last_lane, why)
 
     def maybe_replan(self) -> None:
         """Plan at the start, then whenever needed (:meth:`_maybe_replan`)."""

@@ -152,6 +152,10 @@ def vehicle_metrics(driver: Any, d: dict[str, np.ndarray], totals: RunTotals
             f"each sample and {CURVATURE_SPAN:g} m of path before and after it"),
         "max_longitudinal_acceleration": float(np.abs(d["a_lon"]).max()) if len(t) else None,
         "max_jerk": float(d["jerk"].max()) if len(t) else None,
+        # stands of STUCK_AFTER seconds or more, and why (the deadlock watch)
+        "stuck": driver.stuck,
+        # published plans of vehicles before it that speed alone could not keep clear of
+        "plan_conflicts": driver.conflicts[:100],
         "replans": [r.__dict__ for r in driver.replans],
         "replan_count": len(driver.replans),
         "planning_time": summary_stats(plan_times),

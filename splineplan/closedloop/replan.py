@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from splineplan.closedloop.cooperate import WAIT_REPLAN, plans_before
 from splineplan.closedloop.perception import Perception
 from splineplan.corridor import Corridor
 from splineplan.errors import (
@@ -23,6 +24,7 @@ from splineplan.errors import (
 )
 from splineplan.geometry import FloatArray
 from splineplan.obstacles import Obstacles
+from splineplan.spacetime import published
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +56,8 @@ class Replan:
         ``start``, ``horizon`` (the window ran short), ``obstacles`` (new obstacles ahead),
         ``deviation`` (SUMO put the ego off the plan), ``traffic`` (a moving vehicle beside
         the ego comes near the planned path), ``reroute`` (level 1 after level 2 found the
-        road closed) or ``retry`` (after a failed plan).
+        road closed), ``cooperation`` (again while waiting for another planned vehicle's
+        published plan) or ``retry`` (after a failed plan).
     planning_time
         Wall time [s] of the planning (levels 1 to 3 as needed).
     station
@@ -143,6 +146,12 @@ class Replanning(Perception):
                     self._replan("traffic", f"vehicle '{near}' beside the ego comes near the "
                                             "planned path", obstacles=self._obstacles_ahead(ahead))
                     return
+        if self.waiting_for and self.time >= self.wait_replan_at:
+            self.wait_replan_at = self.time + WAIT_REPLAN
+            self._replan("cooperation", "waiting for the plan of "
+                         + ", ".join(f"'{v}'" for v in self.waiting_for),
+                         obstacles=self._obstacles_ahead(ahead))
+            return
         assert self.corridor is not None
         left = float(self.path_s[-1]) - self.u
         if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
@@ -260,9 +269,59 @@ class Replanning(Perception):
                     f"from an obstacle {float(traj.s[bad[0]]):.1f} m ahead")
             log.info("t=%.1f trajectory infeasible %.1f m ahead: driving %.1f m of it",
                      self.time, float(traj.s[bad[0]]), usable)
+        if self.board:
+            traj, roadmaps, everything = self._among_plans(traj, roadmaps, window, everything,
+                                                           final)
         self._take(traj, s1, usable=usable)
         self.plans.append((self.time, roadmaps, traj, window, everything))
+        if self.publish and hasattr(traj, "t"):
+            self.published_plan = published(traj, id=self.ego, t0=self.time,
+                                            length=ego.length, width=ego.width)
         return True, None
+
+    def _among_plans(self, traj: Any, roadmaps: Any, window: Any, everything: Obstacles,
+                     final: bool) -> tuple[Any, Any, Obstacles]:
+        """The trajectory retimed among the published plans of the vehicles before this
+        one (:mod:`.cooperate`); its path planned again around the first whose margin speed
+        alone cannot keep."""
+        from splineplan.errors import SplineplanError
+        from splineplan.planner import plan_corridor
+        from splineplan.spacetime import retime
+
+        sc, ego = self.sc, self.sc.ego
+        plans = plans_before(self.board, self.ego, self.priority, np.asarray(traj.xy),
+                             self.time)
+        self.waiting_for = ()
+        if not plans:
+            return traj, roadmaps, everything
+        end_speed = 0.0 if final else None
+        kw = {"t0": self.time, "length": ego.length, "width": ego.width,
+              "margin": sc.roadmap.safety_margin, "end_speed": end_speed}
+        timed, sp = retime(traj, plans, sc.trajectory, **kw)
+        if sp.conflict is not None:
+            static = sp.conflict.as_static()
+            try:
+                roadmaps2, path2 = plan_corridor(
+                    window, everything + static, self.pose[:2], float(self.pose[2]),
+                    roadmap_params=sc.roadmap, params=sc.trajectory,
+                    start_speed=float(self.v), end_speed=end_speed)
+            except SplineplanError as err:
+                log.info("t=%.1f '%s': no path around the plan of '%s' (%s); yielding "
+                         "by speed", self.time, self.ego, sp.conflict.obstacle.id, err)
+            else:
+                timed2, sp2 = retime(path2, plans, sc.trajectory, **kw)
+                ok = bool(np.all(np.asarray(path2.clearance_obstacles)
+                                 >= sc.roadmap.safety_margin - 1e-6))
+                if ok and (sp2.conflict is None or sp2.conflict.t > sp.conflict.t):
+                    log.info("t=%.1f '%s': path planned around the plan of '%s'",
+                             self.time, self.ego, sp.conflict.obstacle.id)
+                    timed, sp, roadmaps = timed2, sp2, roadmaps2
+                    everything = everything + static
+        self.waiting_for = sp.yielded
+        if sp.conflict is not None:
+            self.conflicts.append({"time": self.time, "other": sp.conflict.obstacle.id,
+                                   "at": sp.conflict.t, "station": sp.conflict.station})
+        return timed, roadmaps, everything
 
     def _take(self, traj: Any, window_end: float, *, usable: float | None = None) -> None:
         s = np.asarray(traj.s, dtype=float)

@@ -29,6 +29,7 @@ from typing import Any
 
 from splineplan._signals import sigint_deferred, sigint_ignored
 from splineplan.closedloop.control import EMERGENCY_FACTOR
+from splineplan.closedloop.cooperate import Published
 from splineplan.closedloop.driver import DRIVERS, Driver, DriverKind
 from splineplan.closedloop.record import (
     RunTotals,
@@ -197,6 +198,8 @@ class _Run:
         self.wall_start = time.perf_counter()
         self.wall_time = 0.0
         self._roads: dict[str, RoadCheck] = {}
+        self.board: dict[str, Published] = {}  # the planned vehicles' latest plans
+        self._entered = 0
         self._junctions: list[Any] = []
         self._polygons: Any = None
 
@@ -360,6 +363,7 @@ class _Run:
         d.fail(f"SimulationError: {text}")
         d.in_sim = False
         self.world.release(d.ego)
+        self.board.pop(d.ego, None)
 
     def _step(self) -> Any:
         try:
@@ -385,6 +389,7 @@ class _Run:
                         d.fail(text)
                         d.in_sim = False
                         self.world.release(d.ego)
+                        self.board.pop(d.ego, None)
         return events
 
     def _enter(self, departed: tuple[str, ...]) -> None:
@@ -399,6 +404,7 @@ class _Run:
                                     remote=d.kind == "planner")
             front, heading = self.world.pose(d.ego)
             d.enter(self.time, front, heading)
+            self._join(d)
         if self.picker is None:
             return
         known = {d.ego for d in self.drivers}
@@ -437,6 +443,15 @@ class _Run:
         front, heading = self.world.pose(vid)
         d.enter(self.time, front, heading, speed=self.world.speed(vid))
         self.drivers.append(d)
+        self._join(d)
+
+    def _join(self, d: Driver) -> None:
+        """A planned vehicle entered: its priority is the order of entering."""
+        d.priority = self._entered
+        self._entered += 1
+        if self.multi:
+            d.board = self.board
+            d.publish = True
 
     def _observe_all(self, arrived: tuple[str, ...]) -> None:
         for d in self.drivers:
@@ -452,12 +467,16 @@ class _Run:
             d.perceive(self.time, st, self.world.around(d.ego, d.sc.sim.stopped_speed))
             if d.status == "arrived":
                 self.world.remove(d.ego)
+                self.board.pop(d.ego, None)
                 continue
             if d.kind == "planner":
                 d.maybe_replan()
                 if d.route_request is not None:
                     edges, d.route_request = d.route_request, None
                     self.world.set_route(d.ego, edges)
+                if d.published_plan is not None:
+                    self.board[d.ego] = Published(d.priority, d.published_plan)
+                    d.published_plan = None
 
     # -- end ----------------------------------------------------------------------------------
     def fail(self, err: BaseException) -> None:

@@ -1,0 +1,57 @@
+"""Cooperation of planned vehicles, the prioritised scheme.
+
+Every planned vehicle publishes its trajectory in space and time
+(:func:`splineplan.spacetime.published`) each time it plans. Vehicles have priorities, in
+the order they entered the simulation: a vehicle treats the published plans of those
+before it as moving obstacles (:func:`among_plans`): it keeps its path and changes its
+speed profile first (:func:`splineplan.spacetime.retime`: pass in front where the limits
+allow, else yield), and plans its path again (levels 2 and 3) around the other's swept
+rectangles (:meth:`splineplan.spacetime.Conflict.as_static`) where speed alone cannot keep
+the margin. A fixed order keeps two vehicles from each waiting for the other; vehicles later
+in the order are still seen as SUMO sees them (time gap, traffic beside, junction foes).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from splineplan.geometry import FloatArray
+from splineplan.spacetime import MovingObstacle
+
+#: Seconds between replans while a vehicle waits for another's published plan.
+WAIT_REPLAN = 1.0
+#: How far [m] beyond a path's bounding box another plan counts as near it.
+NEAR = 10.0
+
+
+@dataclass(frozen=True)
+class Published:
+    """One planned vehicle's latest plan on the board: its priority (lower goes first) and
+    its trajectory in space and time."""
+
+    priority: int
+    plan: MovingObstacle
+
+
+def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: FloatArray,
+                 t0: float) -> list[MovingObstacle]:
+    """The published plans of the vehicles before ``me`` in priority that are still to
+    come (after ``t0`` [s]) and come within :data:`NEAR` of the path ``xy`` ``(n, 2)``."""
+    if not board or not len(xy):
+        return []
+    lo = np.min(xy, axis=0) - NEAR
+    hi = np.max(xy, axis=0) + NEAR
+    out = []
+    for vid, pub in board.items():
+        if vid == me or pub.priority >= priority:
+            continue
+        p = pub.plan
+        if p.t[-1] < t0 and not p.stays:
+            continue
+        inside = np.all((p.xy >= lo) & (p.xy <= hi), axis=1)
+        if inside.any():
+            out.append(p)
+    return out
