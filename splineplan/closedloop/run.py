@@ -200,6 +200,7 @@ class _Run:
         self._roads: dict[str, RoadCheck] = {}
         self.board: dict[str, Published] = {}  # the planned vehicles' latest plans
         self._entered = 0
+        self.sizes: dict[str, tuple[float, float]] = {}  # vehicle types' length, width
         self._junctions: list[Any] = []
         self._polygons: Any = None
 
@@ -501,6 +502,9 @@ class _Run:
 
     def finish(self, *, plot: bool) -> SimResult:
         # SUMO may be running without `started` set, when Ctrl-C came as it started
+        if self.multi and self.world.started:
+            with contextlib.suppress(Exception):
+                self.sizes = self.world.type_sizes()
         if self.world.sumo is not None and (self.world.started or self.status == "interrupted"):
             self.world.close()
         self.wall_time = time.perf_counter() - self.wall_start
@@ -524,9 +528,16 @@ class _Run:
                          d.driven_before + d.route_edges, driven, tuple(d.plans))
 
     def _summary(self, results: dict[str, SimResult]) -> SimResult:
+        from splineplan.closedloop.pairs import pair_safety
         from splineplan.closedloop.record import run_summary, write_json
 
         summary = run_summary(self, results)
+        fcd = self.out / "fcd.xml"
+        if fcd.is_file() and self.status != "interrupted":
+            try:
+                summary["pairs"] = pair_safety(fcd, self.sizes, results)
+            except Exception as err:  # an FCD cut short (SUMO failed): no pair figures
+                log.warning("no pairwise gaps from %s: %s", fcd, err)
         write_json(self.out / "summary.json", summary)
         return SimResult(summary["status"], summary["reason"], self.out, summary, (), (),
                          {}, (), vehicles=results)

@@ -360,6 +360,11 @@ class World:
                 "vclass": vt.getVehicleClass(type_id),
                 "max_speed": float(vt.getMaxSpeed(type_id))}
 
+    def type_sizes(self) -> dict[str, tuple[float, float]]:
+        """Length and width [m] of every vehicle type."""
+        vt = self.sumo.vehicletype
+        return {t: (float(vt.getLength(t)), float(vt.getWidth(t))) for t in vt.getIDList()}
+
     def loaded_types(self, vids: list[str]) -> dict[str, str]:
         """Type id of each loaded (not yet departed) vehicle id asked for."""
         v = self.sumo.vehicle
