@@ -196,6 +196,9 @@ class Scenario:
     from_sumo
         Made by :func:`sumo_scenario`: no planned vehicle of its own (``ego`` is only a
         placeholder); they are chosen among SUMO's.
+    sim_step_given
+        The configuration sets SUMO's step length (else the run passes
+        ``--step-length`` of ``sim``, 0.1 s: SUMO's default of 1 s is too coarse to plan).
     """
 
     name: str
@@ -211,6 +214,7 @@ class Scenario:
     egos: tuple[EgoSpec, ...] = ()
     sumo_config: Path | None = None
     from_sumo: bool = False
+    sim_step_given: bool = False
 
     def __post_init__(self) -> None:
         if self.trajectory is None:
@@ -410,6 +414,7 @@ def sumo_scenario(
 
     cfg_path: Path | None = None
     step = 0.1
+    step_given = False
     if config is not None:
         cfg_path = Path(config)
         if not cfg_path.is_file():
@@ -435,6 +440,7 @@ def sumo_scenario(
                                     ) from err
         if "step-length" in values:
             step = float(values["step-length"])
+            step_given = True
     if net is None:
         raise ScenarioError("a SUMO scenario needs a network: a .sumocfg with a net-file, "
                             "or --net")
@@ -451,4 +457,5 @@ def sumo_scenario(
                     roadmap=RoadmapParams(vehicle_length=template.length,
                                           vehicle_width=template.width),
                     description="SUMO's own scenario, a chosen share of its vehicles planned",
-                    path=cfg_path, sumo_config=cfg_path, from_sumo=True)
+                    path=cfg_path, sumo_config=cfg_path, from_sumo=True,
+                    sim_step_given=step_given)

@@ -12,10 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splineplan.closedloop.cooperate import CROSSING
 from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.sumo.world import Signals
 from splineplan.traffic import first_in_reach, next_in_circle, probe_points, safe_speed
 
+#: A planned vehicle within this distance [m] of where its published plan puts it keeps to
+#: its plan.
+ON_PLAN = 1.5
 #: Lateral slack [m] beyond the ego's half width within which a vehicle counts as in its path.
 PATH_MARGIN = 0.15
 #: Time [s] the ego keeps between its passage of a junction's conflict area and that of a
@@ -141,6 +145,9 @@ class Control(Perception):
                 # circle, and a leader's speed is at least 0: nothing after can go lower
                 if safe_speed(full_s[lo] - base, 0.0, tp.b_max, sim.time_gap) >= cap:
                     break
+                if self.trusted and o.ids[j] in self.trusted and self._keeps_to_plan(
+                        j, full_h[lo]):
+                    continue  # crossing as it published: the plan yields to it
                 pts = probe_points(cx, cy, float(o.cos[j]), float(o.sin[j]),
                                     0.5 * float(o.length[j]), 0.5 * float(o.width[j]))
                 first = first_in_reach(pts, lo, (cx, cy, r, self._sample_step),
@@ -159,6 +166,20 @@ class Control(Perception):
         if give < cap:
             cap = give  # (why_slow set by _yield_speed)
         return cap, int(math.isfinite(cap))
+
+    def _keeps_to_plan(self, j: int, path_heading: float) -> bool:
+        """Whether vehicle ``j`` (of ``self.others``), whose published plan the current
+        plan was timed among (:mod:`.cooperate`), crosses the path and is where that plan
+        says (within :data:`ON_PLAN`): then the plan's timing keeps the margin from it,
+        and the time gap, which would take a crossing vehicle for one standing in the
+        path, does not apply."""
+        o = self.others
+        turn = abs(math.remainder(float(o.head[j]) - path_heading, 2.0 * math.pi))
+        if turn <= CROSSING:
+            return False
+        xy, _, there = self.trusted[o.ids[j]].at([self.time])
+        return bool(there[0]) and math.hypot(float(xy[0, 0]) - float(o.cx[j]),
+                                             float(xy[0, 1]) - float(o.cy[j])) <= ON_PLAN
 
     def _red_light_speed(self) -> float:
         tp = self.sc.trajectory

@@ -13,8 +13,9 @@ in the order are still seen as SUMO sees them (time gap, traffic beside, junctio
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -25,6 +26,8 @@ from splineplan.spacetime import MovingObstacle
 WAIT_REPLAN = 1.0
 #: How far [m] beyond a path's bounding box another plan counts as near it.
 NEAR = 10.0
+#: A plan meeting the path at more than this angle [rad] crosses it (or comes the other way).
+CROSSING = math.radians(30.0)
 
 
 @dataclass(frozen=True)
@@ -37,9 +40,17 @@ class Published:
 
 
 def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: FloatArray,
-                 t0: float) -> list[MovingObstacle]:
+                 heading: FloatArray, t0: float, *, pad: float = 0.0) -> list[MovingObstacle]:
     """The published plans of the vehicles before ``me`` in priority that are still to
-    come (after ``t0`` [s]) and come within :data:`NEAR` of the path ``xy`` ``(n, 2)``."""
+    come (after ``t0`` [s]) and come within :data:`NEAR` of the path ``xy`` ``(n, 2)``
+    (headings ``(n,)`` [rad]).
+
+    A plan that crosses the path or comes the other way (more than :data:`CROSSING` from
+    the path's heading where they meet) is grown by ``pad`` [m] on every side: the vehicle
+    is to wait that far from it (the time-gap control's standstill distance), not only the
+    safety margin; plans along the path are not, so that two vehicles may drive side by
+    side.
+    """
     if not board or not len(xy):
         return []
     lo = np.min(xy, axis=0) - NEAR
@@ -52,6 +63,20 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
         if p.t[-1] < t0 and not p.stays:
             continue
         inside = np.all((p.xy >= lo) & (p.xy <= hi), axis=1)
-        if inside.any():
-            out.append(p)
+        if not inside.any():
+            continue
+        if pad > 0.0 and _crosses(p, xy, heading):
+            p = replace(p, length=p.length + 2.0 * pad, width=p.width + 2.0 * pad)
+        out.append(p)
     return out
+
+
+def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray) -> bool:
+    """Whether a plan meets the path (within :data:`NEAR`) at more than :data:`CROSSING`
+    from the path's heading."""
+    d = np.hypot(plan.xy[:, None, 0] - xy[None, :, 0], plan.xy[:, None, 1] - xy[None, :, 1])
+    near_plan, near_path = np.nonzero(d < NEAR)
+    if not len(near_plan):
+        return False
+    diff = np.abs(np.angle(np.exp(1j * (plan.heading[near_plan] - heading[near_path]))))
+    return bool(np.any(diff > CROSSING))

@@ -290,8 +290,9 @@ class Replanning(Perception):
 
         sc, ego = self.sc, self.sc.ego
         plans = plans_before(self.board, self.ego, self.priority, np.asarray(traj.xy),
-                             self.time)
+                             np.asarray(traj.heading), self.time, pad=sc.sim.min_gap)
         self.waiting_for = ()
+        self.trusted = {}
         if not plans:
             return traj, roadmaps, everything
         end_speed = 0.0 if final else None
@@ -318,6 +319,9 @@ class Replanning(Perception):
                     timed, sp, roadmaps = timed2, sp2, roadmaps2
                     everything = everything + static
         self.waiting_for = sp.yielded
+        # the plans grown by the standstill distance where they cross (cooperate.py): the
+        # control trusts them for vehicles that keep to them
+        self.trusted = {p.id: p for p in plans}
         if sp.conflict is not None:
             self.conflicts.append({"time": self.time, "other": sp.conflict.obstacle.id,
                                    "at": sp.conflict.t, "station": sp.conflict.station})

@@ -256,6 +256,8 @@ class _Run:
             # outputs and, where vehicles are planned, what they need
             if sc.sumo_config is not None:
                 args = ["-c", str(sc.sumo_config)]
+                if not sc.sim_step_given:  # SUMO's default, 1 s, is too coarse to plan
+                    args += ["--step-length", f"{self.dt:g}"]
             else:
                 args = ["-n", str(sc.network), "--step-length", f"{self.dt:g}"]
             if self.sumo_seed:
