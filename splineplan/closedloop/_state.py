@@ -73,6 +73,7 @@ class DriverState:
     publish: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
     waiting_for: tuple[str, ...]
+    board_seen: int  # the board's count of plans when this one last planned
     trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among
     why_slow: str
     wait_replan_at: float

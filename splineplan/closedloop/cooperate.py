@@ -32,15 +32,17 @@ CROSSING = math.radians(30.0)
 
 @dataclass(frozen=True)
 class Published:
-    """One planned vehicle's latest plan on the board: its priority (lower goes first) and
-    its trajectory in space and time."""
+    """One planned vehicle's latest plan on the board: its priority (lower goes first), its
+    trajectory in space and time, and the board's count of plans published when it came."""
 
     priority: int
     plan: MovingObstacle
+    seq: int = 0
 
 
 def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: FloatArray,
-                 heading: FloatArray, t0: float, *, pad: float = 0.0) -> list[MovingObstacle]:
+                 heading: FloatArray, t0: float, *, pad: float = 0.0, after: int = -1
+                 ) -> list[MovingObstacle]:
     """The published plans of the vehicles before ``me`` in priority that are still to
     come (after ``t0`` [s]) and come within :data:`NEAR` of the path ``xy`` ``(n, 2)``
     (headings ``(n,)`` [rad]).
@@ -49,7 +51,7 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
     the path's heading where they meet) is grown by ``pad`` [m] on every side: the vehicle
     is to wait that far from it (the time-gap control's standstill distance), not only the
     safety margin; plans along the path are not, so that two vehicles may drive side by
-    side.
+    side. ``after``: only plans published after the board's count was that.
     """
     if not board or not len(xy):
         return []
@@ -57,7 +59,7 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
     hi = np.max(xy, axis=0) + NEAR
     out = []
     for vid, pub in board.items():
-        if vid == me or pub.priority >= priority:
+        if vid == me or pub.priority >= priority or pub.seq <= after:
             continue
         p = pub.plan
         if p.t[-1] < t0 and not p.stays:

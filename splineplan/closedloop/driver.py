@@ -107,6 +107,7 @@ class Driver(Replanning, Control):
         self.published_plan: Any = None
         self.waiting_for: tuple[str, ...] = ()
         self.trusted: dict[str, Any] = {}
+        self.board_seen = 0
         self.wait_replan_at = 0.0
         self.conflicts: list[dict[str, Any]] = []
         self.why_slow = ""  # what holds the vehicle back (speed control), in words

@@ -139,6 +139,13 @@ class Replanning(Perception):
                 self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
                              obstacles=self._obstacles_ahead(ahead))
                 return
+            if self.board:
+                news = self._new_plans_near()
+                if news:
+                    self._replan("cooperation", "new plan of " + ", ".join(
+                        f"'{v}'" for v in news) + " near the path",
+                                 obstacles=self._obstacles_ahead(ahead))
+                    return
             if self.time >= self.traffic_after:
                 near = self._traffic_conflict()
                 if near is not None:
@@ -279,6 +286,15 @@ class Replanning(Perception):
                                             length=ego.length, width=ego.width)
         return True, None
 
+    def _new_plans_near(self) -> list[str]:
+        """Vehicles before this one that published a plan near the current path since this
+        one planned (it plans again among them)."""
+        if not len(self.path_xy):
+            return []
+        plans = plans_before(self.board, self.ego, self.priority, self.path_xy,
+                             self.path_heading, self.time, after=self.board_seen)
+        return sorted(p.id for p in plans)
+
     def _among_plans(self, traj: Any, roadmaps: Any, window: Any, everything: Obstacles,
                      final: bool) -> tuple[Any, Any, Obstacles]:
         """The trajectory retimed among the published plans of the vehicles before this
@@ -289,6 +305,7 @@ class Replanning(Perception):
         from splineplan.spacetime import retime
 
         sc, ego = self.sc, self.sc.ego
+        self.board_seen = max((p.seq for p in self.board.values()), default=0)
         plans = plans_before(self.board, self.ego, self.priority, np.asarray(traj.xy),
                              np.asarray(traj.heading), self.time, pad=sc.sim.min_gap)
         self.waiting_for = ()

@@ -200,6 +200,7 @@ class _Run:
         self._roads: dict[str, RoadCheck] = {}
         self.board: dict[str, Published] = {}  # the planned vehicles' latest plans
         self._entered = 0
+        self._published = 0  # plans published so far
         self.sizes: dict[str, tuple[float, float]] = {}  # vehicle types' length, width
         self._junctions: list[Any] = []
         self._polygons: Any = None
@@ -478,7 +479,9 @@ class _Run:
                     edges, d.route_request = d.route_request, None
                     self.world.set_route(d.ego, edges)
                 if d.published_plan is not None:
-                    self.board[d.ego] = Published(d.priority, d.published_plan)
+                    self._published += 1
+                    self.board[d.ego] = Published(d.priority, d.published_plan,
+                                                  self._published)
                     d.published_plan = None
 
     # -- end ----------------------------------------------------------------------------------
