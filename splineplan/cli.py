@@ -460,6 +460,9 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         print(f"  planned {m['planned']}, arrived {m['arrived']}, collisions "
               f"{m['collisions']}, off road {m['vehicles_off_road']} vehicle(s), "
               f"wall {m['wall_time']:.1f} s for {m['sim_time_end']:.1f} s simulated")
+        for vid, v in result.vehicles.items():
+            if v.status == "failed":
+                print(f"  {vid}: failed: {v.reason}")
     else:
         print(f"  travel time {m['travel_time'] or 0:.1f} s, distance {m['distance']:.1f} m, "
               f"collisions {m['collisions']}, off road {m['time_off_road']:.1f} s, "
