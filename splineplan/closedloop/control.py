@@ -120,6 +120,7 @@ class Control(Perception):
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
         sim = sc.sim
         cap = math.inf
+        gap_to = -1  # the vehicle (in self.others) whose gap caps the speed
         o = self.others
         reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
         if o.n:
@@ -159,7 +160,9 @@ class Control(Perception):
                 v_l = max(float(o.speed[j]) * rel, 0.0)
                 c = safe_speed(gap, v_l, tp.b_max, sim.time_gap)
                 if c < cap:
-                    cap, self.why_slow = c, f"keeping its gap to vehicle '{o.ids[j]}' ahead"
+                    cap, gap_to = c, j
+        if gap_to >= 0:
+            self.why_slow = f"keeping its gap to vehicle '{o.ids[gap_to]}' ahead"
         red, give = self._red_light_speed(), self._yield_speed()
         if red < cap:
             cap, self.why_slow = red, "stopping at a red light"

@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from splineplan._signals import sigint_deferred, sigint_ignored
-from splineplan.closedloop.control import EMERGENCY_FACTOR
+from splineplan.closedloop.control import EMERGENCY_FACTOR, YIELD_STOP
 from splineplan.closedloop.cooperate import Published
 from splineplan.closedloop.driver import DRIVERS, Driver, DriverKind
 from splineplan.closedloop.record import (
@@ -346,7 +346,7 @@ class _Run:
         for d in self.drivers:
             if not (d.in_sim and d.kind == "planner"):
                 continue
-            mv = d.command(self.world.signals(d.ego, d.sc.sim.lookahead))
+            mv = d.command(self.world.signals(d.ego, d.sc.sim.lookahead, near=YIELD_STOP))
             try:
                 self.world.move(d.ego, mv.edge, mv.lane, mv.centre, mv.heading,
                                 d.sc.ego.length, mv.speed)

@@ -287,8 +287,9 @@ class World:
                       for v in map(res.__getitem__, ids)], dtype=float)
         return Others(ids, a, stopped_speed)
 
-    def signals(self, vid: str, lookahead: float) -> Signals:
-        """Traffic lights and junction foes ahead of ``vid`` within ``lookahead`` [m]."""
+    def signals(self, vid: str, lookahead: float, *, near: float = 0.0) -> Signals:
+        """Traffic lights and junction foes ahead of ``vid`` within ``lookahead`` [m]: the
+        foes it must yield to, farther than ``near`` [m] from their conflict area."""
         s = self.sumo
         t0 = time.perf_counter()
         try:
@@ -302,8 +303,8 @@ class World:
             raw = None
             foes = None
         for f in raw or ():
-            if not f[7]:
-                continue  # the vehicle has the way
+            if not f[7] or f[1] <= near:
+                continue  # the vehicle has the way, or is at (or in) the area already
             try:
                 v_f = s.vehicle.getSpeed(f[0])
                 len_f = s.vehicle.getLength(f[0])
