@@ -189,7 +189,8 @@ class Scenario:
     path
         The scenario file, if read from one.
     egos
-        Every planned vehicle (one ``[[ego]]`` table each; ``ego`` is the first).
+        Every planned vehicle (one ``[[ego]]`` table each); the first is always ``ego``
+        (replace ``ego`` to change it).
     sumo_config
         A SUMO configuration (``.sumocfg``) run as it is (with its own options), when the
         scenario came from one (:func:`sumo_scenario`).
@@ -225,8 +226,8 @@ class Scenario:
             object.__setattr__(self, "egos", ())
         elif not self.egos:
             object.__setattr__(self, "egos", (self.ego,))
-        elif self.egos[0] != self.ego:
-            object.__setattr__(self, "ego", self.egos[0])
+        elif self.egos[0] != self.ego:  # ``ego`` is the first (dataclasses.replace(ego=...))
+            object.__setattr__(self, "egos", (self.ego, *self.egos[1:]))
         ids = [e.id for e in self.egos]
         dup = sorted({i for i in ids if ids.count(i) > 1})
         if dup:

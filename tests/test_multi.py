@@ -156,7 +156,7 @@ def test_unknown_vehicle_id_and_type(tmp_path: Path, capsys: pytest.CaptureFixtu
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown vehicle type 'truck'" in err[0]
     # a flow's vehicle is known by <flow id>.<n>
-    with pytest.raises(ScenarioError, match="'same.x.y'"):
+    with pytest.raises(ScenarioError, match=r"'same\.x\.y'"):
         simulate(sumo_scenario(cfg), out_dir=tmp_path / "p", vehicles=("same.x.y",),
                  progress=False)
 

@@ -32,14 +32,16 @@ REACH = 30.0
 def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
                 planned: Iterable[str]) -> dict[str, Any]:
     """Smallest gap [m] and time-to-collision [s] between any two vehicles of ``fcd``
-    (with the time and the pair), over all pairs and over those with a ``planned`` vehicle,
-    and the pairs with a planned vehicle whose footprints overlapped (first time).
+    (with the time and the pair), over all pairs, over those with a ``planned`` vehicle and
+    (the gap) over those of two planned vehicles, and the pairs with a planned vehicle whose
+    footprints overlapped (first time).
 
     ``sizes``: (length, width) [m] of each vehicle type; a type missing is taken as
     4.5 x 1.8 m.
     """
     plan = set(planned)
-    best = {"gap": _Min(), "gap_planned": _Min(), "ttc": _Min(), "ttc_planned": _Min()}
+    best = {"gap": _Min(), "gap_planned": _Min(), "gap_both": _Min(), "ttc": _Min(),
+            "ttc_planned": _Min()}
     overlaps: dict[tuple[str, str], float] = {}
     for t, ids, front, head, speed, types in _steps(fcd):
         n = len(ids)
@@ -53,11 +55,12 @@ def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
         if not len(pairs):
             continue
         i, j = pairs[:, 0], pairs[:, 1]
-        with_plan = np.array([ids[a] in plan or ids[b] in plan for a, b in zip(i, j,
-                                                                             strict=True)])
+        mine = np.array([v in plan for v in ids])
+        with_plan = mine[i] | mine[j]
         gap = _gaps(centre[i], head[i], size[i], centre[j], head[j], size[j])
         ttc = _ttc(centre, head, speed, size, i, j, gap)
-        for key, mask in (("gap", slice(None)), ("gap_planned", with_plan)):
+        for key, mask in (("gap", slice(None)), ("gap_planned", with_plan),
+                          ("gap_both", mine[i] & mine[j])):
             best[key].update(gap[mask], t, ids, i[mask], j[mask])
         for key, mask in (("ttc", slice(None)), ("ttc_planned", with_plan)):
             best[key].update(ttc[mask], t, ids, i[mask], j[mask])
@@ -67,6 +70,7 @@ def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
     return {
         "min_gap": best["gap"].record(),
         "min_gap_planned": best["gap_planned"].record(),
+        "min_gap_between_planned": best["gap_both"].record(),
         "min_ttc": best["ttc"].record(),
         "min_ttc_planned": best["ttc_planned"].record(),
         "ttc_horizon": TTC_HORIZON,

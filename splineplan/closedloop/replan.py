@@ -25,6 +25,7 @@ from splineplan.errors import (
 from splineplan.geometry import FloatArray
 from splineplan.obstacles import Obstacles
 from splineplan.spacetime import published
+from splineplan.traffic import probe_points
 
 log = logging.getLogger(__name__)
 
@@ -318,6 +319,12 @@ class Replanning(Perception):
         timed, sp = retime(traj, plans, sc.trajectory, **kw)
         if sp.conflict is not None:
             static = sp.conflict.as_static()
+            # not where the vehicle is now: level 2 cannot start inside an obstacle
+            x, y, h = (float(v) for v in self.pose)
+            here = probe_points(x, y, math.cos(h), math.sin(h), ego.length / 2.0,
+                                ego.width / 2.0)
+            static = static.subset(~static.near_mask(np.asarray(here),
+                                                     sc.roadmap.safety_margin + ego.width))
             try:
                 roadmaps2, path2 = plan_corridor(
                     window, everything + static, self.pose[:2], float(self.pose[2]),
