@@ -39,6 +39,15 @@ class Published:
     plan: MovingObstacle
     seq: int = 0
 
+    @property
+    def box(self) -> tuple[FloatArray, FloatArray]:
+        """The plan's bounding box: lowest and highest x, y [m] (computed once)."""
+        cached = self.__dict__.get("_box")
+        if cached is None:
+            cached = (np.min(self.plan.xy, axis=0), np.max(self.plan.xy, axis=0))
+            object.__setattr__(self, "_box", cached)
+        return cached
+
 
 def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: FloatArray,
                  heading: FloatArray, t0: float, *, pad: float = 0.0, after: int = -1
@@ -63,6 +72,9 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
             continue
         p = pub.plan
         if p.t[-1] < t0 and not p.stays:
+            continue
+        b_lo, b_hi = pub.box
+        if (b_lo > hi).any() or (b_hi < lo).any():
             continue
         inside = np.all((p.xy >= lo) & (p.xy <= hi), axis=1)
         if not inside.any():

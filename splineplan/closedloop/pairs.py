@@ -107,10 +107,18 @@ def _gaps(c1: np.ndarray, h1: np.ndarray, s1: np.ndarray, c2: np.ndarray, h2: np
           s2: np.ndarray) -> np.ndarray:
     """:func:`~splineplan.spacetime.box_gap` for rectangles of several sizes (grouped)."""
     out = np.empty(len(c1))
-    key = np.column_stack((s1, s2))
-    for k in np.unique(key, axis=0):
-        m = np.all(key == k, axis=1)
-        out[m] = box_gap(c1[m], h1[m], (k[0], k[1]), c2[m], h2[m], (k[2], k[3]))
+    if not len(c1):
+        return out
+    if (s1 == s1[0]).all() and (s2 == s2[0]).all():  # the common case: one size each
+        return box_gap(c1, h1, (s1[0, 0], s1[0, 1]), c2, h2, (s2[0, 0], s2[0, 1]))
+    # a key per pair of sizes: few sizes, so plain integers
+    sizes, code = np.unique(np.vstack((s1, s2)), axis=0, return_inverse=True)
+    code = code.reshape(-1)
+    key = code[:len(c1)] * len(sizes) + code[len(c1):]
+    for k in np.unique(key):
+        m = key == k
+        a, b = sizes[k // len(sizes)], sizes[k % len(sizes)]
+        out[m] = box_gap(c1[m], h1[m], (a[0], a[1]), c2[m], h2[m], (b[0], b[1]))
     return out
 
 
