@@ -53,12 +53,15 @@ def main(argv: list[str]) -> None:
     ap.add_argument("--share", type=float, default=0.25)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     ap.add_argument("--duration", type=float, default=900.0)
+    ap.add_argument("--out", type=Path, default=None,
+                    help="keep each run's folder here (default: a temporary folder)")
     args = ap.parse_args(argv)
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp_dir:
+        tmp = args.out or Path(tmp_dir)
         print("seed planned arrived collision_pairs off_road stuck min_gap_planned[m] sim[s] "
               "wall_run[s] sim/wall cpu[s] sim/cpu wall/(vehicle*s)")
         for seed in args.seeds:
-            r = _one(args.share, seed, args.duration, Path(tmp) / f"seed{seed}")
+            r = _one(args.share, seed, args.duration, tmp / f"seed{seed}")
             print(f"{seed} {r['planned']:.0f} {r['arrived']:.0f} {r['collision_pairs']:.0f} "
                   f"{r['off_road']:.0f} {r['stuck']:.0f} {r['min_gap_planned']:.2f} "
                   f"{r['sim']:.0f} {r['wall_run']:.0f} "
