@@ -223,3 +223,19 @@ def test_duplicate_ego_ids(tmp_path: Path) -> None:
         load_scenario(p)
 
 
+
+
+def test_ego_tables_default_ids_and_dimensions(tmp_path: Path) -> None:
+    """[[ego]] tables without ids are 'ego', 'ego2', ...; each planned vehicle's level 2
+    uses its own footprint and level 3 at most its own top speed."""
+    p = tmp_path / "three.toml"
+    p.write_text(f'network = "{NETS / "grid.net.xml"}"\n'
+                 '[[ego]]\nstart_edge = "A0B0"\ngoal_edge = "C0D0"\n'
+                 '[[ego]]\nstart_edge = "A1B1"\ngoal_edge = "C1D1"\nlength = 6.0\n'
+                 'max_speed = 10.0\n'
+                 '[[ego]]\nstart_edge = "A2B2"\ngoal_edge = "C2D2"\n')
+    sc = load_scenario(p)
+    assert [e.id for e in sc.egos] == ["ego", "ego2", "ego3"] and sc.ego is sc.egos[0]
+    second = sc.for_vehicle(sc.egos[1])
+    assert second.roadmap.vehicle_length == 6.0 and second.trajectory.s_max == 10.0
+    assert sc.for_vehicle(sc.egos[2]).trajectory.s_max == sc.trajectory.s_max
