@@ -335,8 +335,11 @@ class Replanning(Perception):
                          "by speed", self.time, self.ego, sp.conflict.obstacle.id, err)
             else:
                 timed2, sp2 = retime(path2, plans, sc.trajectory, **kw)
+                # keeps the margin, and keeps to the road no worse than the first path
                 ok = bool(np.all(np.asarray(path2.clearance_obstacles)
-                                 >= sc.roadmap.safety_margin - 1e-6))
+                                 >= sc.roadmap.safety_margin - 1e-6)
+                          and np.min(path2.clearance_road)
+                          >= min(float(np.min(traj.clearance_road)), 0.0) - 1e-6)
                 if ok and (sp2.conflict is None or sp2.conflict.t > sp.conflict.t):
                     log.info("t=%.1f '%s': path planned around the plan of '%s'",
                              self.time, self.ego, sp.conflict.obstacle.id)
