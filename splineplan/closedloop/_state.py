@@ -71,6 +71,7 @@ class DriverState:
     board: Any  # Mapping[str, cooperate.Published]: the plans published so far
     priority: int
     publish: bool
+    keep_plans: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
     waiting_for: tuple[str, ...]
     board_seen: int  # the board's count of plans when this one last planned

@@ -281,7 +281,8 @@ class Replanning(Perception):
             traj, roadmaps, everything = self._among_plans(traj, roadmaps, window, everything,
                                                            final)
         self._take(traj, s1, usable=usable)
-        self.plans.append((self.time, roadmaps, traj, window, everything))
+        if self.keep_plans:  # for the pictures of a single ego's run
+            self.plans.append((self.time, roadmaps, traj, window, everything))
         if self.publish and hasattr(traj, "t"):
             self.published_plan = published(traj, id=self.ego, t0=self.time,
                                             length=ego.length, width=ego.width)

@@ -456,6 +456,7 @@ class _Run:
         if self.multi:
             d.board = self.board
             d.publish = True
+            d.keep_plans = False  # no pictures; hundreds of vehicles' plans would pile up
 
     def _observe_all(self, arrived: tuple[str, ...]) -> None:
         for d in self.drivers:
