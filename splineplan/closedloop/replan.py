@@ -140,9 +140,10 @@ class Replanning(Perception):
                 self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
                              obstacles=self._obstacles_ahead(ahead))
                 return
-            if self.board:
+            if self.board and self.time >= self.wait_replan_at:
                 news = self._new_plans_near()
                 if news:
+                    self.wait_replan_at = self.time + WAIT_REPLAN
                     self._replan("cooperation", "new plan of " + ", ".join(
                         f"'{v}'" for v in news) + " near the path",
                                  obstacles=self._obstacles_ahead(ahead))
