@@ -160,6 +160,7 @@ _PLAN_OUTPUTS = ("plan.json", "trajectory.csv",
                    for fmt in ("png", "pdf", "svg")))
 #: What ``simulate`` writes into its folder.
 _SIM_OUTPUTS = ("metrics.json", "trajectory.csv", "fcd.xml", "sumo.log", "run.log",
+                "summary.json", "tripinfo.xml", "*/metrics.json", "*/trajectory.csv",
                 *(f"{n}.{fmt}" for n in ("route", "speed_time") for fmt in ("png", "pdf", "svg")),
                 "plans/plan_*.png")
 
@@ -374,19 +375,46 @@ def _cmd_plot(args: argparse.Namespace) -> int:
         print(f"{run}: nothing to draw (see the warnings)")
     return 0
 
+def _share(text: str) -> float:
+    """A fraction in [0, 1] (an argparse type)."""
+    x = _float(text)
+    if not 0.0 <= x <= 1.0:
+        raise argparse.ArgumentTypeError(f"must be a fraction between 0 and 1, got {text!r}")
+    return x
+
+
 def _add_simulate(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
-        "simulate", help="drive an ego vehicle with the planner through a SUMO scenario",
-        description="Run a scenario (TOML, see scenarios/) in SUMO with the planner driving "
-                    "the ego vehicle; write metrics.json, trajectory.csv and fcd.xml.")
-    p.add_argument("scenario", help="scenario file (.toml)")
+        "simulate", help="drive vehicles with the planner through a SUMO scenario",
+        description="Run a scenario (TOML, see scenarios/; or SUMO's own: a .sumocfg, or "
+                    "--net with --routes) in SUMO with the planner driving the ego "
+                    "vehicle(s), or a chosen set of SUMO's vehicles (--vehicles, --vtype, "
+                    "--share); write metrics.json, trajectory.csv and fcd.xml (per planned "
+                    "vehicle in <out>/<id>/, with summary.json and tripinfo.xml, when "
+                    "more than one vehicle is planned).")
+    p.add_argument("scenario", nargs="?", default=None,
+                   help="scenario file (.toml) or SUMO configuration (.sumocfg)")
+    p.add_argument("--net", default=None, help="SUMO network (instead of a scenario file)")
+    p.add_argument("--routes", nargs="+", default=[], metavar="R.rou.xml",
+                   help="SUMO route files (with --net)")
+    p.add_argument("--additional", nargs="+", default=[], metavar="A.add.xml",
+                   help="SUMO additional files (with --net)")
+    p.add_argument("--duration", type=_positive, default=None,
+                   help="simulated seconds (a SUMO scenario: default its end time, else an "
+                        "hour)")
+    p.add_argument("--vehicles", nargs="+", default=[], metavar="ID",
+                   help="plan these of SUMO's vehicles (a flow's are <flow id>.<n>)")
+    p.add_argument("--vtype", default=None, help="plan SUMO's vehicles of this type")
+    p.add_argument("--share", type=_share, default=None,
+                   help="plan this fraction (0..1) of SUMO's departing passenger vehicles, "
+                        "drawn with --seed")
     p.add_argument("--out", default=None,
                    help="output folder (default: runs/<scenario name>); its earlier run "
                         "files and pictures are replaced")
     p.add_argument("--plot", action="store_true", help="also draw the route and each plan")
     p.add_argument("--gui", action="store_true", help="watch in sumo-gui (through traci)")
     p.add_argument("--seed", type=_int_in(0, MAX_SEED), default=None,
-                   help="SUMO's random seed (an integer >= 0)")
+                   help="SUMO's random seed and that of --share's draw (an integer >= 0)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--driver", choices=("planner", "sumo", "sublane"), default="planner",
                    help="who drives the ego: the planner (default), SUMO's lane-based "
@@ -395,27 +423,50 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
 
 
 def _cmd_simulate(args: argparse.Namespace) -> int:
+    import dataclasses
     from pathlib import Path
 
-    from splineplan.errors import Interrupted
-    from splineplan.scenario import load_scenario
+    from splineplan.errors import Interrupted, ScenarioError
+    from splineplan.scenario import load_scenario, sumo_scenario
     from splineplan.sim import simulate
 
     given = _out_dir(args.out) if args.out else None
-    scenario = load_scenario(args.scenario)
+    if args.scenario is None and args.net is None:
+        raise ScenarioError("give a scenario file (.toml or .sumocfg) or --net NET")
+    if args.scenario is not None and args.net is not None:
+        raise ScenarioError("give either a scenario file or --net, not both")
+    if args.scenario is not None and not args.scenario.endswith((".sumocfg", ".cfg")):
+        if args.routes or args.additional:
+            raise ScenarioError("--routes and --additional go with --net or a .sumocfg")
+        scenario = load_scenario(args.scenario)
+        if args.duration is not None:
+            scenario = dataclasses.replace(scenario, sim=dataclasses.replace(
+                scenario.sim, duration=args.duration))
+    else:
+        scenario = sumo_scenario(args.scenario, net=args.net, routes=tuple(args.routes),
+                                 additional=tuple(args.additional), duration=args.duration)
     out = given or _out_dir(Path("runs") / scenario.name)
     _clear_outputs(out, _SIM_OUTPUTS)
     try:
         result = simulate(scenario, out_dir=out, plot=args.plot, gui=args.gui, seed=args.seed,
-                          progress=False if args.no_progress else None, driver=args.driver)
+                          progress=False if args.no_progress else None, driver=args.driver,
+                          share=args.share, vehicles=tuple(args.vehicles), vtype=args.vtype)
     except Interrupted as stop:  # Ctrl-C: the record up to then is written
         print(f"splineplan simulate: {stop}", file=sys.stderr)
         return 130
     m = result.metrics
     print(f"{scenario.name}: {result.status}: {result.reason}")
-    print(f"  travel time {m['travel_time'] or 0:.1f} s, distance {m['distance']:.1f} m, "
-          f"collisions {m['collisions']}, off road {m['time_off_road']:.1f} s, "
-          f"replans {m['replan_count']}")
+    if result.vehicles or "planned" in m:
+        print(f"  planned {m['planned']}, arrived {m['arrived']}, collisions "
+              f"{m['collisions']}, off road {m['vehicles_off_road']} vehicle(s), "
+              f"wall {m['wall_time']:.1f} s for {m['sim_time_end']:.1f} s simulated")
+        for vid, v in result.vehicles.items():
+            if v.status == "failed":
+                print(f"  {vid}: failed: {v.reason}")
+    else:
+        print(f"  travel time {m['travel_time'] or 0:.1f} s, distance {m['distance']:.1f} m, "
+              f"collisions {m['collisions']}, off road {m['time_off_road']:.1f} s, "
+              f"replans {m['replan_count']}")
     print(f"  outputs in {out}")
     return 0 if result.arrived else 1
 

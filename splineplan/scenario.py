@@ -188,6 +188,18 @@ class Scenario:
         Free text.
     path
         The scenario file, if read from one.
+    egos
+        Every planned vehicle (one ``[[ego]]`` table each); the first is always ``ego``
+        (replace ``ego`` to change it).
+    sumo_config
+        A SUMO configuration (``.sumocfg``) run as it is (with its own options), when the
+        scenario came from one (:func:`sumo_scenario`).
+    from_sumo
+        Made by :func:`sumo_scenario`: no planned vehicle of its own (``ego`` is only a
+        placeholder); they are chosen among SUMO's.
+    sim_step_given
+        The configuration sets SUMO's step length (else the run passes
+        ``--step-length`` of ``sim``, 0.1 s: SUMO's default of 1 s is too coarse to plan).
     """
 
     name: str
@@ -200,12 +212,38 @@ class Scenario:
     trajectory: Any = None
     description: str = ""
     path: Path | None = None
+    egos: tuple[EgoSpec, ...] = ()
+    sumo_config: Path | None = None
+    from_sumo: bool = False
+    sim_step_given: bool = False
 
     def __post_init__(self) -> None:
         if self.trajectory is None:
             from splineplan.trajectory import TrajectoryParams
 
             object.__setattr__(self, "trajectory", TrajectoryParams())
+        if self.from_sumo:
+            object.__setattr__(self, "egos", ())
+        elif not self.egos:
+            object.__setattr__(self, "egos", (self.ego,))
+        elif self.egos[0] != self.ego:  # ``ego`` is the first (dataclasses.replace(ego=...))
+            object.__setattr__(self, "egos", (self.ego, *self.egos[1:]))
+        ids = [e.id for e in self.egos]
+        dup = sorted({i for i in ids if ids.count(i) > 1})
+        if dup:
+            raise ScenarioError(f"{self.name}: two planned vehicles with id {dup[0]!r}; give "
+                                "each [[ego]] its own id")
+
+    def for_vehicle(self, ego: EgoSpec) -> Scenario:
+        """The scenario as one planned vehicle sees it: ``ego`` its own, the roadmap's
+        footprint its dimensions, ``trajectory.s_max`` at most its top speed."""
+        roadmap = dataclasses.replace(self.roadmap, vehicle_length=ego.length,
+                                      vehicle_width=ego.width)
+        traj = self.trajectory
+        if hasattr(traj, "s_max") and traj.s_max > ego.max_speed:
+            traj = dataclasses.replace(traj, s_max=ego.max_speed)
+        return dataclasses.replace(self, ego=ego, egos=(ego,), roadmap=roadmap,
+                                   trajectory=traj, from_sumo=False)
 
     def with_seed(self, seed: int) -> Scenario:
         """The same scenario with another SUMO seed."""
@@ -250,8 +288,17 @@ def scenario_from_dict(
     routes = tuple(_existing(base, p, where, "routes") for p in _str_list(data, "routes", where))
     additional = tuple(_existing(base, p, where, "additional")
                        for p in _str_list(data, "additional", where))
-    ego_raw = _section(data, "ego", where)
-    ego = _build(EgoSpec, ego_raw, where, "ego")
+    raw_egos = data["ego"]
+    if isinstance(raw_egos, list):  # [[ego]] tables
+        if not raw_egos or not all(isinstance(e, Mapping) for e in raw_egos):
+            raise ScenarioError(f"{where}: [[ego]] must be one or more tables")
+        egos = tuple(
+            _build(EgoSpec, {"id": "ego" if i == 0 else f"ego{i + 1}", **e}, where,
+                   "ego" if i == 0 else f"ego {i + 1}")
+            for i, e in enumerate(raw_egos))
+    else:
+        egos = (_build(EgoSpec, _section(data, "ego", where), where, "ego"),)
+    ego = egos[0]
     sim = _build(SimParams, _section(data, "sim", where), where, "sim")
     roadmap_raw = dict(_section(data, "roadmap", where))
     for key in _EGO_DIMENSIONS:
@@ -283,7 +330,7 @@ def scenario_from_dict(
         raise ScenarioError(f"{where}: description must be a string")
     return Scenario(name=name, network=network, ego=ego, routes=routes, additional=additional,
                     sim=sim, roadmap=roadmap, trajectory=trajectory, description=description,
-                    path=path)
+                    path=path, egos=egos)
 
 
 def _check_keys(data: Mapping[str, Any], allowed: set[str], where: str, section: str) -> None:
@@ -340,3 +387,76 @@ def _is_float(annotation: Any) -> bool:
     text = annotation if isinstance(annotation, str) else getattr(annotation, "__name__", "")
     return "float" in str(text)
 
+
+
+def sumo_scenario(
+    config: str | Path | None = None,
+    *,
+    net: str | Path | None = None,
+    routes: tuple[str | Path, ...] = (),
+    additional: tuple[str | Path, ...] = (),
+    duration: float | None = None,
+    name: str | None = None,
+) -> Scenario:
+    """A SUMO scenario as it is: a ``.sumocfg`` (run with its own options) or a network with
+    route and additional files.
+
+    The planned vehicles are chosen among SUMO's own when the run starts
+    (:class:`~splineplan.closedloop.select.Selection`); their start, route and goal are
+    SUMO's. The planner's parameters are the defaults of the bundled scenarios; the
+    duration [s] is ``duration``, else the configuration's ``end - begin``, else an hour.
+
+    Raises
+    ------
+    ScenarioError
+        A file is missing or not readable XML, or the configuration names no network.
+    """
+    import xml.etree.ElementTree as ET
+
+    cfg_path: Path | None = None
+    step = 0.1
+    step_given = False
+    if config is not None:
+        cfg_path = Path(config)
+        if not cfg_path.is_file():
+            raise ScenarioError(f"SUMO configuration not found: {cfg_path}")
+        try:
+            root = ET.parse(cfg_path).getroot()
+        except ET.ParseError as err:
+            raise ScenarioError(f"{cfg_path}: not readable XML: {err}") from err
+        values = {el.tag: el.get("value", "") for el in root.iter() if el.get("value")}
+        base = cfg_path.parent
+        if net is None and "net-file" in values:
+            net = base / values["net-file"]
+        routes = (*routes, *(base / p.strip() for p in values.get("route-files", "").split(",")
+                             if p.strip()))
+        additional = (*additional, *(base / p.strip() for p in
+                                     values.get("additional-files", "").split(",")
+                                     if p.strip()))
+        if duration is None and "end" in values:
+            try:
+                duration = float(values["end"]) - float(values.get("begin", 0.0))
+            except ValueError as err:
+                raise ScenarioError(f"{cfg_path}: end {values['end']!r} is not a number"
+                                    ) from err
+        if "step-length" in values:
+            step = float(values["step-length"])
+            step_given = True
+    if net is None:
+        raise ScenarioError("a SUMO scenario needs a network: a .sumocfg with a net-file, "
+                            "or --net")
+    where = str(cfg_path) if cfg_path is not None else "SUMO scenario"
+    network = _existing(Path("."), str(net), where, "net-file")
+    rou = tuple(_existing(Path("."), str(p), where, "route-files") for p in routes)
+    add = tuple(_existing(Path("."), str(p), where, "additional-files") for p in additional)
+    sim = SimParams(duration=float(duration) if duration else 3600.0, step_length=step,
+                    lookahead=100.0)
+    template = EgoSpec(start_edge="-", goal_edge="-", id="planned")
+    stem = cfg_path.name.split(".")[0] if cfg_path is not None else Path(network).name.split(".")[0]
+    return Scenario(name=name or stem, network=network, ego=template, routes=rou,
+                    additional=add, sim=sim,
+                    roadmap=RoadmapParams(vehicle_length=template.length,
+                                          vehicle_width=template.width),
+                    description="SUMO's own scenario, a chosen share of its vehicles planned",
+                    path=cfg_path, sumo_config=cfg_path, from_sumo=True,
+                    sim_step_given=step_given)

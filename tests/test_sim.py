@@ -38,7 +38,9 @@ from splineplan.sim import SimResult, simulate, stopped_vehicle_obstacles
 SCENARIOS = ROOT / "scenarios"
 #: Long runs, in the slow tests: Monaco (needs ../shared/data) and the city among busy traffic.
 LONG = {"monaco", "city_traffic"}
-BUNDLED = sorted(p.stem for p in SCENARIOS.glob("*.toml") if p.stem not in LONG)
+#: Scenarios with several planned vehicles: tests/test_multi.py.
+MULTI = {"two_side_by_side"}
+BUNDLED = sorted(p.stem for p in SCENARIOS.glob("*.toml") if p.stem not in LONG | MULTI)
 
 
 def _run(name: str, out: Path, **kw: object) -> SimResult:

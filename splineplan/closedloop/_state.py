@@ -1,0 +1,101 @@
+"""The attributes of a planned vehicle's state, declared once for the driver's mixins."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from splineplan.corridor import Corridor
+from splineplan.geometry import FloatArray
+from splineplan.obstacles import Obstacles
+from splineplan.sumo.world import Signals
+from splineplan.traffic import Others
+
+
+class DriverState:
+    """Declarations only (set in :class:`~splineplan.closedloop.driver.Driver`)."""
+
+    sc: Any
+    net: Any
+    ego: str
+    kind: str
+    dt: float
+    time: float
+    status: str
+    reason: str
+    rows: list[tuple[Any, ...]]
+    replans: list[Any]
+    plans: list[Any]
+    collisions: list[dict[str, Any]]
+    position_errors: list[float]
+    avoid: set[str]
+    route_edges: tuple[str, ...]
+    driven_before: tuple[str, ...]
+    route_length: float
+    route_request: list[str] | None
+    corridor: Corridor | None
+    polygons: Obstacles
+    road: Any
+    traj: Any
+    path_s: FloatArray
+    path_xy: FloatArray
+    path_heading: FloatArray
+    path_speed: FloatArray
+    ext_s: FloatArray
+    ext_xy: FloatArray
+    ext_heading: FloatArray
+    full_s: FloatArray
+    full_xy: FloatArray
+    full_heading: FloatArray
+    u: float
+    v: float
+    pose: FloatArray
+    sumo_front: FloatArray
+    sumo_heading: float
+    planned_ids: frozenset[str]
+    window_end: float
+    truncated: bool
+    stop_at: float | None
+    retry_at: float | None
+    goal_station: float
+    last_lane: str
+    plan_seconds: float
+    station: float
+    lateral: float
+    deviation: float
+    limited: int
+    traffic_after: float
+    trigger_after: float
+    others: Others
+    board: Any  # Mapping[str, cooperate.Published]: the plans published so far
+    priority: int
+    publish: bool
+    keep_plans: bool
+    published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
+    waiting_for: tuple[str, ...]
+    board_seen: int  # the board's count of plans when this one last planned
+    trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among
+    why_slow: str
+    wait_replan_at: float
+    conflicts: list[dict[str, Any]]
+    signals: Signals
+    _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
+    _pl: tuple[list[float], ...]
+    _full: tuple[list[float], ...]
+    _ahead_box: tuple[list[float], ...]
+    _sample_step: float
+    _lane_of: tuple[str, int]
+    _ref_a: FloatArray
+    _ref_ab: FloatArray
+    _ref_s: list[float]
+    _ref_cols: tuple[FloatArray, ...]
+    _ref_len: FloatArray
+    _ref_heading: FloatArray
+    _edge_starts: list[float]
+    _beside_at: tuple[float, float] | None
+    _beside_was: tuple[np.ndarray, FloatArray]
+    _cand_at: tuple[float, float] | None
+    _cand_was: list[int]
+    _turn_key: tuple[Corridor, float] | None
+    _turn_window: FloatArray

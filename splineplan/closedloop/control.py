@@ -1,0 +1,268 @@
+"""Control of one planned vehicle: the speed along its trajectory, capped to keep a time
+gap to whatever is in its path, to stop at red lights and to give way at junctions as SUMO's
+right of way says, and where SUMO is to put it next. No SUMO calls: the traffic lights and
+junction foes come in as :class:`~splineplan.sumo.world.Signals`.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from splineplan.closedloop.cooperate import CROSSING
+from splineplan.closedloop.perception import Perception, _interp, _locate
+from splineplan.sumo.world import Signals
+from splineplan.traffic import first_in_reach, next_in_circle, probe_points, safe_speed
+
+#: A planned vehicle within this distance [m] of where its published plan puts it keeps to
+#: its plan.
+ON_PLAN = 1.5
+#: Lateral slack [m] beyond the ego's half width within which a vehicle counts as in its path.
+PATH_MARGIN = 0.15
+#: Time [s] the ego keeps between its passage of a junction's conflict area and that of a
+#: vehicle it must yield to; it stops this far [m] before the area to let that one pass.
+YIELD_GAP = 1.5
+YIELD_STOP = 1.0
+#: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
+STOPPED_FOE_SPEED = 0.1
+#: The closed loop's emergency deceleration, a multiple of the planner's ``b_max``: the
+#: speed control brakes up to this hard when something comes into the ego's path (and SUMO's
+#: vehicle type of the ego has it as its ``emergencyDecel``).
+EMERGENCY_FACTOR = 2.0
+
+
+@dataclass(frozen=True)
+class Move:
+    """Where SUMO is to put a planned vehicle: the route edge and lane index to map it
+    onto, its centre ``(x, y)`` [m], heading [rad] and speed [m/s]."""
+
+    edge: str
+    lane: int
+    centre: tuple[float, float]
+    heading: float
+    speed: float
+
+
+class Control(Perception):
+    """The control half of a :class:`~splineplan.closedloop.driver.Driver` (a mixin)."""
+
+    def command(self, signals: Signals) -> Move:
+        """Advance along the trajectory by one step: where SUMO is to put the vehicle.
+
+        ``signals``: the traffic lights and junction foes ahead, read from SUMO just before.
+        """
+        self.signals = signals
+        if self.traj is None:
+            self.why_slow = f"no plan ({self.reason})" if self.reason else "no plan yet"
+            return self._move()
+        sc, ego = self.sc, self.sc.ego
+        tp = sc.trajectory
+        dt = self.dt
+        # speed squared is linear in station under constant acceleration: interpolate it
+        u_next = self.u + self.v * dt + 0.5 * tp.a_max * dt * dt
+        ps, px, py, ph, pv2 = self._pl
+        v_plan = math.sqrt(max(_interp(u_next, ps, pv2), 0.0))
+        self.why_slow = ""
+        v_cap, limited = self._gap_speed()
+        if self.stop_at is not None:
+            v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (self.stop_at - self.u), 0.0)))
+            limited = 1
+        end = float(self.path_s[-1])
+        # stop at the trajectory's end unless a new plan comes first
+        v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (end - self.u), 0.0)))
+        v_target = min(v_plan, v_cap)
+        if self.stop_at is not None and not self.why_slow:
+            self.why_slow = f"stopping before a blockage ({self.reason})"
+        if v_plan < v_cap and self.waiting_for:
+            self.why_slow = ("waiting for the published plan of "
+                             + ", ".join(f"'{v}'" for v in self.waiting_for))
+        emergency = EMERGENCY_FACTOR * tp.b_max
+        v_new = min(max(v_target, self.v - emergency * dt), self.v + tp.a_max * dt)
+        v_new = max(v_new, 0.0)
+        u = min(self.u + 0.5 * (self.v + v_new) * dt, end)
+        if u >= end:
+            v_new = 0.0
+        self.u, self.v = u, v_new
+        self.limited = limited
+        j, f = _locate(u, ps)
+        x = px[j] + f * (px[j + 1] - px[j])
+        y = py[j] + f * (py[j + 1] - py[j])
+        h = ph[j] + f * (ph[j + 1] - ph[j])
+        self.pose = np.array([x, y, h])
+        del ego
+        return self._move(x, y, h)
+
+    def _move(self, x: float | None = None, y: float | None = None, h: float | None = None
+              ) -> Move:
+        """Put the ego at centre ``x``, ``y`` [m], heading ``h`` [rad] (default: its pose)."""
+        if x is None or y is None or h is None:
+            x, y, h = (float(v) for v in self.pose)
+        assert self.corridor is not None
+        edge = self._edge_at(self.station)
+        if self._lane_of[0] != self.last_lane:
+            self._lane_of = (self.last_lane, _lane_index(self.last_lane))
+        return Move(edge, self._lane_of[1], (x, y), h, self.v)
+
+    def _gap_speed(self) -> tuple[float, int]:
+        """Speed cap [m/s] to keep the time gap to whatever is in the path, and red lights.
+
+        A vehicle is in the path where a corner, the centre or an edge's midpoint of its
+        footprint comes within the ego's half width plus :data:`PATH_MARGIN` of a path sample
+        ahead of the ego (the trajectory and its straight extension); the gap is to the first
+        such sample. Only the samples within the vehicle's bounding circle plus that reach
+        can be in reach: a vehicle whose circle misses the bounding box of the samples
+        ahead is skipped, and the samples in the circle are found by a walk along the path
+        that skips those the distance bound rules out (:func:`~splineplan.traffic.next_in_circle`).
+        """
+        sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
+        sim = sc.sim
+        cap = math.inf
+        gap_to = -1  # the vehicle (in self.others) whose gap caps the speed
+        o = self.others
+        reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
+        if o.n:
+            full_s, full_x, full_y, full_h = self._full
+            i0 = bisect.bisect_left(self._pl[0], self.u)  # first sample ahead
+            cand = []  # (first sample in the circle, vehicle, centre x, y, circle's radius)
+            if i0 < len(full_s):
+                x0, x1, y0, y1 = (b[i0] for b in self._ahead_box)
+                step = self._sample_step
+                for j, (cx, cy, r) in enumerate(zip(o.cx.tolist(), o.cy.tolist(),
+                                                    o.radius.tolist(), strict=True)):
+                    r += reach
+                    if cx + r < x0 or cx - r > x1 or cy + r < y0 or cy - r > y1:
+                        continue
+                    lo = next_in_circle(full_x, full_y, i0, cx, cy, r, step)
+                    if lo >= 0:
+                        cand.append((lo, j, cx, cy, r))
+            cand.sort()
+            reach2 = reach * reach
+            base = self.u + ego.length / 2.0 + sim.min_gap
+            for lo, j, cx, cy, r in cand:
+                # the gap is at least up to the first sample in reach of the bounding
+                # circle, and a leader's speed is at least 0: nothing after can go lower
+                if safe_speed(full_s[lo] - base, 0.0, tp.b_max, sim.time_gap) >= cap:
+                    break
+                if self.trusted and o.ids[j] in self.trusted and self._keeps_to_plan(
+                        j, full_h[lo]):
+                    continue  # crossing as it published: the plan yields to it
+                pts = probe_points(cx, cy, float(o.cos[j]), float(o.sin[j]),
+                                    0.5 * float(o.length[j]), 0.5 * float(o.width[j]))
+                first = first_in_reach(pts, lo, (cx, cy, r, self._sample_step),
+                                        full_x, full_y, reach2)
+                if first < 0:
+                    continue
+                gap = full_s[first] - base
+                rel = math.cos(float(o.head[j]) - full_h[first])
+                v_l = max(float(o.speed[j]) * rel, 0.0)
+                c = safe_speed(gap, v_l, tp.b_max, sim.time_gap)
+                if c < cap:
+                    cap, gap_to = c, j
+        if gap_to >= 0:
+            self.why_slow = f"keeping its gap to vehicle '{o.ids[gap_to]}' ahead"
+        red, give = self._red_light_speed(), self._yield_speed()
+        if red < cap:
+            cap, self.why_slow = red, "stopping at a red light"
+        if give < cap:
+            cap = give  # (why_slow set by _yield_speed)
+        return cap, int(math.isfinite(cap))
+
+    def _keeps_to_plan(self, j: int, path_heading: float) -> bool:
+        """Whether vehicle ``j`` (of ``self.others``), whose published plan the current
+        plan was timed among (:mod:`.cooperate`), crosses the path and is where that plan
+        says (within :data:`ON_PLAN`): then the plan's timing keeps the margin from it,
+        and the time gap, which would take a crossing vehicle for one standing in the
+        path, does not apply."""
+        o = self.others
+        turn = abs(math.remainder(float(o.head[j]) - path_heading, 2.0 * math.pi))
+        if turn <= CROSSING:
+            return False
+        xy, _, there = self.trusted[o.ids[j]].at([self.time])
+        return bool(there[0]) and math.hypot(float(xy[0, 0]) - float(o.cx[j]),
+                                             float(xy[0, 1]) - float(o.cy[j])) <= ON_PLAN
+
+    def _red_light_speed(self) -> float:
+        tp = self.sc.trajectory
+        tls = self.signals.lights
+        if tls is None:
+            return math.inf
+        for _, _, dist, state in tls:
+            if dist > self.sc.sim.lookahead:
+                break
+            if state in "rRyYu":
+                need = self.v * self.v / (2.0 * tp.b_max)
+                if state in "yY" and dist < need:
+                    return math.inf  # cannot stop comfortably: go
+                return math.sqrt(max(2.0 * tp.b_max * (dist - 1.0), 0.0))
+            break
+        return math.inf
+
+    def _yield_speed(self) -> float:
+        """Speed cap [m/s] that gives way at junctions, as SUMO's right of way says.
+
+        For each vehicle that the ego must yield to on its way through the next junctions
+        (``getJunctionFoes``: ``egoResponse``) and that has not cleared the conflict area,
+        the times it occupies that area (at its speed) and the times the ego would (along
+        its plan, accelerating from its speed) are compared; where they come within
+        :data:`YIELD_GAP` of each other, the ego stops :data:`YIELD_STOP` before the area,
+        if it still can at its braking limit. Once it cannot, it goes on: a car that stops
+        inside a crossing blocks it. A foe standing still outside the area is waiting
+        (for a light or another vehicle) and is no conflict.
+        """
+        tp, ego = self.sc.trajectory, self.sc.ego
+        foes = self.signals.foes
+        if foes is None:  # an older SUMO, or the ego not on its route: SUMO's view only
+            return math.inf
+        cap = math.inf
+        for foe in foes:
+            ego_in, foe_in, ego_out, foe_out, must_yield = (
+                foe.ego_in, foe.foe_in, foe.ego_out, foe.foe_out, foe.must_yield)
+            if not must_yield or ego_in <= YIELD_STOP:
+                continue  # the ego has the way, or is at (or in) the area already
+            v_f = foe.foe_speed
+            foe_out += foe.foe_length
+            if foe_out <= 0.0 or (foe_in > 0.0 and v_f < STOPPED_FOE_SPEED):
+                continue  # cleared, or waiting outside the area
+            t_foe_in = max(foe_in, 0.0) / max(v_f, 1e-3)
+            t_foe_out = foe_out / max(v_f, 1e-3)
+            t_in = self._time_along_plan(ego_in)
+            t_out = self._time_along_plan(ego_out + ego.length)
+            if t_in - YIELD_GAP >= t_foe_out or t_foe_in >= t_out + YIELD_GAP:
+                continue
+            room = ego_in - YIELD_STOP
+            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * room:
+                continue  # cannot stop before the area, even braking hard: clear it
+            # a comfortable stop, one step early
+            c = math.sqrt(max(2.0 * tp.b_max * (room - self.v * self.dt), 0.0))
+            if c < cap:
+                cap = c
+                self.why_slow = (f"giving way at a junction to vehicle '{foe.id}', as "
+                                 "SUMO's right of way says")
+        return cap
+
+    def _time_along_plan(self, dist: float) -> float:
+        """Time [s] the ego takes to drive ``dist`` [m] along its plan from where it is,
+        at the plan's speeds but no faster than accelerating from its speed at ``a_max``."""
+        ps, _, _, _, pv2 = self._pl
+        a2 = 2.0 * self.sc.trajectory.a_max
+        u0, end = self.u, min(self.u + dist, ps[-1])
+        t, u, v = 0.0, u0, self.v
+        i = bisect.bisect_right(ps, u0)
+        while u < end - 1e-9:
+            nxt = min(ps[i], end) if i < len(ps) else end
+            v_next = max(min(math.sqrt(max(_interp(nxt, ps, pv2), 0.0)),
+                             math.sqrt(self.v * self.v + a2 * (nxt - u0))), 0.5)
+            t += 2.0 * (nxt - u) / (max(v, 0.5) + v_next)
+            u, v, i = nxt, v_next, i + 1
+        # beyond the plan's end: at the last speed
+        return t + max(dist - (end - u0), 0.0) / max(v, 0.5)
+
+
+def _lane_index(lane_id: str) -> int:
+    try:
+        return int(lane_id.rsplit("_", 1)[1])
+    except (IndexError, ValueError):
+        return 0

@@ -1,0 +1,96 @@
+"""Cooperation of planned vehicles, the prioritised scheme.
+
+Every planned vehicle publishes its trajectory in space and time
+(:func:`splineplan.spacetime.published`) each time it plans. Vehicles have priorities, in
+the order they entered the simulation: a vehicle treats the published plans of those
+before it as moving obstacles (:func:`among_plans`): it keeps its path and changes its
+speed profile first (:func:`splineplan.spacetime.retime`: pass in front where the limits
+allow, else yield), and plans its path again (levels 2 and 3) around the other's swept
+rectangles (:meth:`splineplan.spacetime.Conflict.as_static`) where speed alone cannot keep
+the margin. A fixed order keeps two vehicles from each waiting for the other; vehicles later
+in the order are still seen as SUMO sees them (time gap, traffic beside, junction foes).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from splineplan.geometry import FloatArray
+from splineplan.spacetime import MovingObstacle
+
+#: Seconds between replans while a vehicle waits for another's published plan.
+WAIT_REPLAN = 1.0
+#: How far [m] beyond a path's bounding box another plan counts as near it.
+NEAR = 10.0
+#: A plan meeting the path at more than this angle [rad] crosses it (or comes the other way).
+CROSSING = math.radians(30.0)
+
+
+@dataclass(frozen=True)
+class Published:
+    """One planned vehicle's latest plan on the board: its priority (lower goes first), its
+    trajectory in space and time, and the board's count of plans published when it came."""
+
+    priority: int
+    plan: MovingObstacle
+    seq: int = 0
+
+    @property
+    def box(self) -> tuple[FloatArray, FloatArray]:
+        """The plan's bounding box: lowest and highest x, y [m] (computed once)."""
+        cached = self.__dict__.get("_box")
+        if cached is None:
+            cached = (np.min(self.plan.xy, axis=0), np.max(self.plan.xy, axis=0))
+            object.__setattr__(self, "_box", cached)
+        return cached
+
+
+def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: FloatArray,
+                 heading: FloatArray, t0: float, *, pad: float = 0.0, after: int = -1
+                 ) -> list[MovingObstacle]:
+    """The published plans of the vehicles before ``me`` in priority that are still to
+    come (after ``t0`` [s]) and come within :data:`NEAR` of the path ``xy`` ``(n, 2)``
+    (headings ``(n,)`` [rad]).
+
+    A plan that crosses the path or comes the other way (more than :data:`CROSSING` from
+    the path's heading where they meet) is grown by ``pad`` [m] on every side: the vehicle
+    is to wait that far from it (the time-gap control's standstill distance), not only the
+    safety margin; plans along the path are not, so that two vehicles may drive side by
+    side. ``after``: only plans published after the board's count was that.
+    """
+    if not board or not len(xy):
+        return []
+    lo = np.min(xy, axis=0) - NEAR
+    hi = np.max(xy, axis=0) + NEAR
+    out = []
+    for vid, pub in board.items():
+        if vid == me or pub.priority >= priority or pub.seq <= after:
+            continue
+        p = pub.plan
+        if p.t[-1] < t0 and not p.stays:
+            continue
+        b_lo, b_hi = pub.box
+        if (b_lo > hi).any() or (b_hi < lo).any():
+            continue
+        inside = np.all((p.xy >= lo) & (p.xy <= hi), axis=1)
+        if not inside.any():
+            continue
+        if pad > 0.0 and _crosses(p, xy, heading):
+            p = replace(p, length=p.length + 2.0 * pad, width=p.width + 2.0 * pad)
+        out.append(p)
+    return out
+
+
+def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray) -> bool:
+    """Whether a plan meets the path (within :data:`NEAR`) at more than :data:`CROSSING`
+    from the path's heading."""
+    d = np.hypot(plan.xy[:, None, 0] - xy[None, :, 0], plan.xy[:, None, 1] - xy[None, :, 1])
+    near_plan, near_path = np.nonzero(d < NEAR)
+    if not len(near_plan):
+        return False
+    diff = np.abs(np.angle(np.exp(1j * (plan.heading[near_plan] - heading[near_path]))))
+    return bool(np.any(diff > CROSSING))

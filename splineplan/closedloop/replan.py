@@ -1,0 +1,447 @@
+"""Replanning of one planned vehicle: when to plan again, levels 2 and 3 on the window
+ahead (among stopped obstacles and the traffic beside), and level 1 again with a blocked
+edge avoided. No SUMO calls: a new route is left in ``route_request`` for the run.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from splineplan.closedloop.cooperate import WAIT_REPLAN, plans_before
+from splineplan.closedloop.perception import Perception
+from splineplan.corridor import Corridor
+from splineplan.errors import (
+    GeometryError,
+    NoRouteError,
+    RoadBlockedError,
+    TrajectoryError,
+)
+from splineplan.geometry import FloatArray
+from splineplan.obstacles import Obstacles
+from splineplan.spacetime import published
+from splineplan.traffic import probe_points
+
+log = logging.getLogger(__name__)
+
+#: Seconds between retries when no plan could be made.
+_RETRY_AFTER = 1.0
+#: Re-routes tried in one replan before giving up.
+_MAX_REROUTES = 5
+#: Spacing [m] of the path samples used to find vehicles in the ego's path.
+_PATH_SPACING = 0.5
+#: Straight extension [m] of the path beyond the trajectory's end, to see what is in the way.
+_PATH_EXTENSION = 60.0
+#: At most one ``traffic`` replan per this many seconds.
+_TRAFFIC_REPLAN_EVERY = 0.5
+#: Period [s] of the checks for new obstacles ahead and for traffic beside the ego coming
+#: near the plan (a reaction time well below a driver's; the deviation and horizon checks,
+#: and the ego's own safety checks, run every step).
+TRIGGER_PERIOD = 0.3
+
+
+@dataclass(frozen=True)
+class Replan:
+    """One planning call of the closed loop.
+
+    Attributes
+    ----------
+    time
+        Simulation time [s].
+    reason
+        ``start``, ``horizon`` (the window ran short), ``obstacles`` (new obstacles ahead),
+        ``deviation`` (SUMO put the ego off the plan), ``traffic`` (a moving vehicle beside
+        the ego comes near the planned path), ``reroute`` (level 1 after level 2 found the
+        road closed), ``cooperation`` (again while waiting for another planned vehicle's
+        published plan) or ``retry`` (after a failed plan).
+    planning_time
+        Wall time [s] of the planning (levels 1 to 3 as needed).
+    station
+        The ego's station [m] on the route at that time.
+    ok
+        Whether a trajectory came out.
+    detail
+        What triggered it or what failed.
+    """
+
+    time: float
+    reason: str
+    planning_time: float
+    station: float
+    ok: bool = True
+    detail: str = ""
+
+
+@dataclass(frozen=True)
+class _Cut:
+    """The drivable start of a trajectory whose end came too near an obstacle."""
+
+    s: FloatArray
+    x: FloatArray
+    y: FloatArray
+    heading: FloatArray
+    speed: FloatArray
+
+
+class Replanning(Perception):
+    """The replanning half of a :class:`~splineplan.closedloop.driver.Driver` (a mixin)."""
+
+    def _set_route(self, corridor: Corridor, edges: tuple[str, ...]) -> None:
+        ego = self.sc.ego
+        self.corridor = corridor
+        self.route_edges = tuple(edges)
+        ref = np.asarray(corridor.reference, dtype=float)
+        self._ref_a = ref[:-1]
+        self._ref_ab = np.diff(ref, axis=0)
+        seg_len = np.hypot(self._ref_ab[:, 0], self._ref_ab[:, 1])
+        self._ref_len = np.where(seg_len > 0, seg_len, 1.0)  # zero-length: t = 0, l = 0
+        self._ref_heading = np.arctan2(self._ref_ab[:, 1], self._ref_ab[:, 0])
+        # the same as contiguous columns, and the stations as a list, for :meth:`_project`
+        self._ref_cols = (self._ref_a[:, 0].copy(), self._ref_a[:, 1].copy(),
+                          self._ref_ab[:, 0].copy(), self._ref_ab[:, 1].copy(),
+                          self._ref_len * self._ref_len)
+        self._ref_s = np.asarray(corridor.s, dtype=float).tolist()
+        self._edge_starts = np.asarray(corridor.edge_starts, dtype=float).tolist()
+        self._obs_cache = {}
+        i = len(edges) - 1
+        goal_len = self.net.length_of(ego.goal_edge)
+        goal_pos = ego.goal_pos if ego.goal_pos is not None else max(
+            goal_len - self.sc.sim.goal_margin, 0.0)
+        # the goal edge's stretch on the corridor: scale SUMO's lane position onto it
+        start = float(corridor.edge_starts[i])
+        stretch = corridor.length - start
+        front = start + goal_pos * (stretch / goal_len if goal_len > 0 else 1.0)
+        self.goal_station = front - ego.length / 2.0
+
+    def _maybe_replan(self) -> None:
+        """Replan when needed: retry after a failure, SUMO put the ego off the plan, the plan
+        runs short (every step), a new obstacle ahead, a vehicle beside the ego comes near
+        the plan (every :data:`TRIGGER_PERIOD`)."""
+        sim = self.sc.sim
+        if self.traj is None or self.retry_at is not None:
+            if self.retry_at is not None and self.time >= self.retry_at:
+                self._replan("retry", self.reason)
+            return
+        if self.deviation > sim.deviation_tolerance:
+            self._set_pose_from_sumo()
+            self._replan("deviation", f"SUMO placed the ego {self.deviation:.2f} m off the plan")
+            return
+        ahead = None
+        if self.time >= self.trigger_after:
+            self.trigger_after = self.time + TRIGGER_PERIOD - 0.5 * self.dt
+            ahead = self._ahead()
+            new = self._ahead_ids(*ahead) - self.planned_ids
+            if new:
+                self._replan("obstacles", "new obstacle(s) ahead: " + ", ".join(sorted(new)),
+                             obstacles=self._obstacles_ahead(ahead))
+                return
+            if self.board and self.time >= self.wait_replan_at:
+                news = self._new_plans_near()
+                if news:
+                    self.wait_replan_at = self.time + WAIT_REPLAN
+                    self._replan("cooperation", "new plan of " + ", ".join(
+                        f"'{v}'" for v in news) + " near the path",
+                                 obstacles=self._obstacles_ahead(ahead))
+                    return
+            if self.time >= self.traffic_after:
+                near = self._traffic_conflict()
+                if near is not None:
+                    self.traffic_after = self.time + _TRAFFIC_REPLAN_EVERY
+                    self._replan("traffic", f"vehicle '{near}' beside the ego comes near the "
+                                            "planned path", obstacles=self._obstacles_ahead(ahead))
+                    return
+        if self.waiting_for and self.time >= self.wait_replan_at:
+            self.wait_replan_at = self.time + WAIT_REPLAN
+            self._replan("cooperation", "waiting for the plan of "
+                         + ", ".join(f"'{v}'" for v in self.waiting_for),
+                         obstacles=self._obstacles_ahead(ahead))
+            return
+        assert self.corridor is not None
+        left = float(self.path_s[-1]) - self.u
+        if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
+                left < sim.replan_distance):
+            self._replan("horizon", f"{left:.1f} m of the plan left",
+                         obstacles=self._obstacles_ahead(ahead))
+
+    def _set_pose_from_sumo(self) -> None:
+        """The pose where SUMO has the vehicle (as last perceived)."""
+        front, h = self.sumo_front, self.sumo_heading
+        c = front - self.sc.ego.length / 2.0 * np.array([math.cos(h), math.sin(h)])
+        self.pose = np.array([c[0], c[1], h])
+
+    def _replan(self, reason: str, detail: str, *, obstacles: Obstacles | None = None) -> None:
+        t0 = time.perf_counter()
+        obstacles = self._obstacles_ahead() if obstacles is None else obstacles
+        ok, msg = self._plan(obstacles)
+        reroutes = 0
+        while not ok and isinstance(msg, RoadBlockedError) and reroutes < _MAX_REROUTES:
+            reroutes += 1
+            done, why = self._reroute(msg)
+            if not done:
+                msg = why
+                break
+            obstacles = self._obstacles_ahead()
+            ok, msg = self._plan(obstacles)
+            if ok:
+                reason = "reroute"
+                detail = why
+        elapsed = time.perf_counter() - t0
+        self.plan_seconds += elapsed
+        station = self.station
+        if ok:
+            self.retry_at = None
+            self.stop_at = None
+            self.planned_ids = frozenset(obstacles.ids)
+            self.replans.append(Replan(self.time, reason, elapsed, station, True, detail))
+            log.debug("t=%.1f replan (%s) in %.1f ms", self.time, reason, 1e3 * elapsed)
+            return
+        text = str(msg)
+        self.replans.append(Replan(self.time, reason, elapsed, station, False,
+                                   f"{detail}; failed: {text}" if detail else text))
+        log.info("t=%.1f plan failed: %s", self.time, text)
+        self.reason = f"no plan: {text}"
+        self.retry_at = self.time + _RETRY_AFTER
+        self._brake_before_blockage(msg)
+
+    def _plan(self, obstacles: Obstacles) -> tuple[bool, Any]:
+        """Levels 2 and 3 on the window ahead. Returns (ok, error).
+
+        Moving vehicles beside the ego (:meth:`_moving_obstacles`) are planned around too
+        where that gives a trajectory that keeps the safety margin; otherwise the plan is
+        made among the stopped obstacles alone and the moving vehicles are left to the
+        time-gap speed control.
+        """
+        moving = self._moving_obstacles()
+        if len(moving):
+            ok, err = self._plan_among(obstacles, moving)
+            if ok:
+                return ok, err
+            log.debug("t=%.1f no plan around the traffic beside the ego (%s): planning "
+                      "among the stopped obstacles only", self.time, err)
+        return self._plan_among(obstacles, None)
+
+    def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None
+                    ) -> tuple[bool, Any]:
+        """Levels 2 and 3 among ``obstacles`` (and ``moving``, strictly: any failure or a
+        trajectory short of the margin is a refusal, never a truncated plan)."""
+        from splineplan.planner import plan_corridor
+
+        sc, ego = self.sc, self.sc.ego
+        assert self.corridor is not None
+        s0 = max(self.station - ego.length, 0.0)
+        s1 = self.station + sc.sim.lookahead
+        if len(obstacles):  # reach past every obstacle seen, so a closed road shows at once
+            far = float(self.corridor.to_sl(obstacles.vertices)[:, 0].max())
+            s1 = max(s1, far + ego.length + 2.0 * sc.roadmap.d)
+        s1 = min(s1, self.corridor.length)
+        if s1 - s0 < 2.0 * sc.roadmap.d + ego.length:
+            s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, 0.0)
+        final = s1 >= self.corridor.length - 1e-6
+        everything = obstacles if moving is None else obstacles + moving
+        try:
+            window = self.corridor.slice(s0, s1)
+            roadmaps, traj = plan_corridor(
+                window, everything, self.pose[:2], float(self.pose[2]),
+                roadmap_params=sc.roadmap, params=sc.trajectory,
+                start_speed=float(self.v), end_speed=0.0 if final else None)
+        except RoadBlockedError as err:
+            if moving is not None:
+                return False, err
+            blocked = err
+            if blocked.edge is None:
+                blocked = RoadBlockedError(str(err), station=err.station,
+                                           edge=self.corridor.edge_at(float(err.station)),
+                                           junction=self.corridor.junction_at(
+                                               float(err.station)))
+            blocked.station_on_route = float(blocked.station)  # type: ignore[attr-defined]
+            return False, blocked
+        except (TrajectoryError, GeometryError) as err:
+            return False, err
+        bad = np.flatnonzero(np.asarray(traj.clearance_obstacles)
+                             < sc.roadmap.safety_margin - 1e-6)
+        usable = None
+        if len(bad) and moving is not None:
+            return False, TrajectoryError("trajectory comes too near the traffic beside")
+        if len(bad):
+            # level 3 reports a curve that comes closer than the margin: drive only the part
+            # that keeps clear, stop before the rest, and replan on the way
+            usable = float(traj.s[bad[0]]) - sc.roadmap.d
+            if usable < max(2.0 * sc.roadmap.d, 0.5 * float(self.v) ** 2 / (
+                    sc.trajectory.b_max)):
+                return False, TrajectoryError(
+                    f"trajectory passes {float(np.min(traj.clearance_obstacles)):.2f} m "
+                    f"from an obstacle {float(traj.s[bad[0]]):.1f} m ahead")
+            log.info("t=%.1f trajectory infeasible %.1f m ahead: driving %.1f m of it",
+                     self.time, float(traj.s[bad[0]]), usable)
+        if self.board:
+            traj, roadmaps, everything = self._among_plans(traj, roadmaps, window, everything,
+                                                           final)
+        self._take(traj, s1, usable=usable)
+        if self.keep_plans:  # for the pictures of a single ego's run
+            self.plans.append((self.time, roadmaps, traj, window, everything))
+        if self.publish and hasattr(traj, "t"):
+            self.published_plan = published(traj, id=self.ego, t0=self.time,
+                                            length=ego.length, width=ego.width)
+        return True, None
+
+    def _new_plans_near(self) -> list[str]:
+        """Vehicles before this one that published a plan near the current path since this
+        one planned (it plans again among them)."""
+        if not len(self.path_xy):
+            return []
+        plans = plans_before(self.board, self.ego, self.priority, self.path_xy,
+                             self.path_heading, self.time, after=self.board_seen)
+        return sorted(p.id for p in plans)
+
+    def _among_plans(self, traj: Any, roadmaps: Any, window: Any, everything: Obstacles,
+                     final: bool) -> tuple[Any, Any, Obstacles]:
+        """The trajectory retimed among the published plans of the vehicles before this
+        one (:mod:`.cooperate`); its path planned again around the first whose margin speed
+        alone cannot keep."""
+        from splineplan.errors import SplineplanError
+        from splineplan.planner import plan_corridor
+        from splineplan.spacetime import retime
+
+        sc, ego = self.sc, self.sc.ego
+        self.board_seen = max((p.seq for p in self.board.values()), default=0)
+        plans = plans_before(self.board, self.ego, self.priority, np.asarray(traj.xy),
+                             np.asarray(traj.heading), self.time, pad=sc.sim.min_gap)
+        self.waiting_for = ()
+        self.trusted = {}
+        if not plans:
+            return traj, roadmaps, everything
+        end_speed = 0.0 if final else None
+        kw = {"t0": self.time, "length": ego.length, "width": ego.width,
+              "margin": sc.roadmap.safety_margin, "end_speed": end_speed}
+        timed, sp = retime(traj, plans, sc.trajectory, **kw)
+        if sp.conflict is not None:
+            static = sp.conflict.as_static()
+            # not where the vehicle is now: level 2 cannot start inside an obstacle
+            x, y, h = (float(v) for v in self.pose)
+            here = probe_points(x, y, math.cos(h), math.sin(h), ego.length / 2.0,
+                                ego.width / 2.0)
+            static = static.subset(~static.near_mask(np.asarray(here),
+                                                     sc.roadmap.safety_margin + ego.width))
+            try:
+                roadmaps2, path2 = plan_corridor(
+                    window, everything + static, self.pose[:2], float(self.pose[2]),
+                    roadmap_params=sc.roadmap, params=sc.trajectory,
+                    start_speed=float(self.v), end_speed=end_speed)
+            except SplineplanError as err:
+                log.info("t=%.1f '%s': no path around the plan of '%s' (%s); yielding "
+                         "by speed", self.time, self.ego, sp.conflict.obstacle.id, err)
+            else:
+                timed2, sp2 = retime(path2, plans, sc.trajectory, **kw)
+                # keeps the margin, and keeps to the road no worse than the first path
+                ok = bool(np.all(np.asarray(path2.clearance_obstacles)
+                                 >= sc.roadmap.safety_margin - 1e-6)
+                          and np.min(path2.clearance_road)
+                          >= min(float(np.min(traj.clearance_road)), 0.0) - 1e-6)
+                if ok and (sp2.conflict is None or sp2.conflict.t > sp.conflict.t):
+                    log.info("t=%.1f '%s': path planned around the plan of '%s'",
+                             self.time, self.ego, sp.conflict.obstacle.id)
+                    timed, sp, roadmaps = timed2, sp2, roadmaps2
+                    everything = everything + static
+        self.waiting_for = sp.yielded
+        # the plans grown by the standstill distance where they cross (cooperate.py): the
+        # control trusts them for vehicles that keep to them
+        self.trusted = {p.id: p for p in plans}
+        if sp.conflict is not None:
+            self.conflicts.append({"time": self.time, "other": sp.conflict.obstacle.id,
+                                   "at": sp.conflict.t, "station": sp.conflict.station})
+        return timed, roadmaps, everything
+
+    def _take(self, traj: Any, window_end: float, *, usable: float | None = None) -> None:
+        s = np.asarray(traj.s, dtype=float)
+        self.truncated = usable is not None
+        if usable is not None:  # cut the trajectory: the ego stops at its new end
+            cut = max(int(np.searchsorted(s, usable)), 2)
+            traj = _Cut(s[:cut], np.asarray(traj.x)[:cut], np.asarray(traj.y)[:cut],
+                        np.asarray(traj.heading)[:cut], np.asarray(traj.speed)[:cut])
+            s = traj.s
+        n = max(math.ceil(s[-1] / _PATH_SPACING), 1) + 1
+        u = np.linspace(0.0, s[-1], n)
+        self.path_s = u
+        self.path_xy = np.column_stack((np.interp(u, s, traj.x), np.interp(u, s, traj.y)))
+        self.path_heading = np.interp(u, s, np.unwrap(traj.heading))
+        self.path_speed = np.interp(u, s, traj.speed)
+        ext = np.arange(1, int(_PATH_EXTENSION / _PATH_SPACING) + 1) * _PATH_SPACING
+        h_end = self.path_heading[-1]
+        self.ext_s = u[-1] + ext
+        self.ext_xy = self.path_xy[-1] + ext[:, None] * np.array([math.cos(h_end),
+                                                                  math.sin(h_end)])
+        self.ext_heading = np.full(len(ext), h_end)
+        # the path and its straight extension, for the time-gap check
+        self.full_xy = np.concatenate((self.path_xy, self.ext_xy))
+        self.full_s = np.concatenate((self.path_s, self.ext_s))
+        self.full_heading = np.concatenate((self.path_heading, self.ext_heading))
+        # for the time-gap check: the bounding box (x min, x max, y min, y max) of the
+        # samples from each on, and the largest distance between consecutive samples
+        fx, fy = self.full_xy[:, 0], self.full_xy[:, 1]
+        self._ahead_box = tuple(acc(v[::-1])[::-1].tolist() for acc, v in (
+            (np.minimum.accumulate, fx), (np.maximum.accumulate, fx),
+            (np.minimum.accumulate, fy), (np.maximum.accumulate, fy)))
+        self._sample_step = (float(np.hypot(np.diff(fx), np.diff(fy)).max()) * (1.0 + 1e-9)
+                             if len(fx) > 1 else 0.0)
+        # plain lists for the per-step interpolation along the path
+        self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
+                    self.path_heading.tolist(), (self.path_speed**2).tolist())
+        self._full = (self.full_s.tolist(), self.full_xy[:, 0].tolist(),
+                      self.full_xy[:, 1].tolist(), self.full_heading.tolist())
+        self.traj = traj
+        self.u = 0.0
+        # the trajectory starts at the ego's centre: keep u where the ego is
+        d = np.hypot(*(self.path_xy - self.pose[:2]).T)
+        self.u = float(u[int(np.argmin(d[: max(1, int(5.0 / _PATH_SPACING))]))])
+        self.window_end = window_end
+
+    def _reroute(self, err: RoadBlockedError) -> tuple[bool, Any]:
+        """Level 1 again with the blocked edge avoided. Returns (done, detail or error)."""
+        from splineplan.network import route_corridor
+        from splineplan.route import route_length, shortest_route
+
+        ego = self.sc.ego
+        assert self.corridor is not None
+        blocked = err.closed_edge
+        here = self.corridor.edge_at(self.station)
+        if blocked is None or blocked == here or blocked in self.avoid:
+            return False, err
+        self.avoid.add(blocked)
+        assert here is not None
+        start = float(self.corridor.edge_starts[self.corridor.edges.index(here)])
+        pos = min(max(self.station - start + ego.length / 2.0, 0.0), self.net.length_of(here))
+        try:
+            route = shortest_route(self.net, here, ego.goal_edge, vclass=ego.vclass,
+                                   avoid=self.avoid, start_pos=pos)
+            corridor = route_corridor(self.net, route, vclass=ego.vclass)
+        except (NoRouteError, GeometryError) as e:
+            return False, RoadBlockedError(f"{err}; no other route: {e}", station=err.station,
+                                           edge=blocked)
+        self.route_request = list(route.edges)  # the run gives it to SUMO
+        old = self.route_edges
+        self.driven_before += old[:old.index(here)]
+        self._set_route(corridor, route.edges)
+        self.station = float(corridor.to_sl(self.pose[:2])[0, 0])
+        # the route as driven from the start: what was driven before, then the new route
+        self.route_length = route_length(self.net, self.driven_before + route.edges,
+                                         vclass=ego.vclass, start_pos=ego.start_pos)
+        log.info("t=%.1f re-routed around %s", self.time, blocked)
+        return True, (f"edge '{blocked}' blocked; route {' '.join(old)} -> "
+                      f"{' '.join(route.edges)}")
+
+    def _brake_before_blockage(self, err: Any) -> None:
+        """No new plan: keep the old trajectory but stop before the blockage."""
+        if self.traj is None:
+            return
+        st = getattr(err, "station_on_route", None)
+        if st is None:
+            self.stop_at = self.u + 0.5 * self.v * self.v / self.sc.trajectory.b_max
+            return
+        # station on the route -> on the trajectory: offset by where the ego is on both
+        margin = self.sc.ego.length + 2.0 * self.sc.roadmap.d + 2.0
+        self.stop_at = max(self.u + (st - self.station) - margin, self.u)

@@ -1,0 +1,457 @@
+"""The running SUMO simulation: the only module that imports ``libsumo`` (and ``traci``,
+for ``sumo-gui``).
+
+:class:`World` starts SUMO, steps it, reads each planned vehicle and the vehicles around it
+once a step (a subscription and a context subscription per planned vehicle; no per-vehicle
+getters), moves planned vehicles (``moveToXY`` at the front bumper, ``keepRoute=3``, and
+``setSpeed``), sets routes, reads traffic lights and junction foes, and closes. Every error
+SUMO raises reaches the caller as :class:`SumoError`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from splineplan.errors import SimulationError
+from splineplan.geometry import FloatArray, heading_from_sumo_angle, sumo_angle_from_heading
+from splineplan.obstacles import Obstacles
+from splineplan.traffic import NO_OTHERS, Others
+
+#: ``moveToXY`` keepRoute: bit 1 maps onto the vehicle's route only, bit 2 keeps the exact x, y.
+KEEP_ROUTE = 3
+
+
+class SumoError(SimulationError):
+    """SUMO refused a command or failed (the one SUMO error type of the package)."""
+
+
+@dataclass(frozen=True)
+class StepEvents:
+    """What happened in one SUMO step.
+
+    Attributes
+    ----------
+    time
+        Simulation time [s] after the step.
+    collisions
+        SUMO's collision reports (dicts: time, collider, victim, type, lane, pos).
+    teleported
+        Vehicles whose teleport started.
+    departed, arrived
+        Vehicles inserted in this step, and those that left the simulation at their
+        route's end.
+    """
+
+    time: float
+    collisions: tuple[dict[str, Any], ...]
+    teleported: tuple[str, ...]
+    departed: tuple[str, ...]
+    arrived: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """A planned vehicle as SUMO has it after a step (its subscription).
+
+    Attributes
+    ----------
+    front
+        Middle of the front bumper ``(2,)`` [m].
+    angle
+        SUMO's angle [deg], 0 = north, clockwise.
+    speed
+        [m/s].
+    lane
+        SUMO lane id.
+    """
+
+    front: tuple[float, float]
+    angle: float
+    speed: float
+    lane: str
+
+
+@dataclass(frozen=True)
+class JunctionFoe:
+    """A vehicle with which a planned vehicle shares a conflict area ahead
+    (``vehicle.getJunctionFoes``), distances [m] along each one's way."""
+
+    id: str
+    ego_in: float
+    foe_in: float
+    ego_out: float
+    foe_out: float
+    must_yield: bool
+    foe_speed: float
+    foe_length: float
+
+
+@dataclass(frozen=True)
+class Signals:
+    """What lies ahead of a planned vehicle at junctions: traffic lights
+    ``(id, link index, distance [m], state)`` in order, and junction foes (``None``: SUMO
+    cannot say, e.g. the vehicle is off its route)."""
+
+    lights: tuple[tuple[Any, ...], ...] | None
+    foes: tuple[JunctionFoe, ...] | None
+
+
+def sumo_message(err: BaseException) -> str:
+    """SUMO's message of an exception (libsumo's ``str()`` may be its repr only)."""
+    msg = getattr(err, "message", None)
+    if isinstance(msg, str) and msg:
+        return msg
+    text = str(err)
+    if text.startswith("<libsumo"):
+        return type(err).__name__
+    return text
+
+
+class World:
+    """One running SUMO simulation (one per process with libsumo).
+
+    ``seconds`` is the wall time [s] spent inside SUMO (start, steps, moves, reads, close).
+    """
+
+    def __init__(self, *, gui: bool = False) -> None:
+        self.gui = gui
+        self.sumo: Any = None
+        self.started = False
+        self.time = 0.0
+        self.seconds = 0.0
+        self.c: Any = None
+
+    # -- start and stop ------------------------------------------------------------------------
+    def start(self, args: list[str], *, log_file: Path | None = None) -> None:
+        """Start SUMO with command-line ``args`` (without the binary)."""
+        if self.gui:
+            import traci as sumo_mod
+
+            binary = "sumo-gui"
+        else:
+            import libsumo as sumo_mod
+
+            binary = "sumo"
+        try:
+            import sumolib
+
+            binary = sumolib.checkBinary(binary)
+        except Exception:
+            pass
+        cmd = [binary, *args]
+        if self.gui:
+            cmd += ["--start", "--quit-on-end"]
+        self.sumo = sumo_mod
+        t0 = time.perf_counter()
+        try:
+            sumo_mod.start(cmd)
+        except Exception as err:
+            _safe_close(sumo_mod)
+            log_text = _tail(log_file) if log_file is not None else ""
+            raise SumoError(sumo_message(err)
+                            + (f"; SUMO says: {log_text}" if log_text else "")) from err
+        self.started = True
+        self.c = sumo_mod.constants
+        self.seconds += time.perf_counter() - t0
+
+    def close(self) -> None:
+        """Close SUMO (its output files are complete afterwards); never raises."""
+        if self.sumo is None:
+            return
+        t0 = time.perf_counter()
+        _safe_close(self.sumo)
+        self.seconds += time.perf_counter() - t0
+        self.started = False
+
+    # -- the static world ----------------------------------------------------------------------
+    def junction_shapes(self) -> list[FloatArray]:
+        """Outlines ``(n, 2)`` of the network's (non-internal) junctions."""
+        s = self.sumo
+        shapes = []
+        for jid in s.junction.getIDList():
+            if jid.startswith(":"):
+                continue
+            shape = np.asarray(s.junction.getShape(jid), dtype=float)
+            if len(shape) >= 3:
+                shapes.append(shape)
+        return shapes
+
+    def obstacle_polygons(self) -> Obstacles:
+        """Polygons whose type starts with ``obstacle``, ids ``polygon:<id>``."""
+        s = self.sumo
+        polys, ids = [], []
+        for pid in s.polygon.getIDList():
+            if s.polygon.getType(pid).lower().startswith("obstacle"):
+                shape = np.asarray(s.polygon.getShape(pid), dtype=float)
+                if len(shape) >= 3:
+                    polys.append(shape)
+                    ids.append(f"polygon:{pid}")
+        return Obstacles.from_polygons(polys, ids) if polys else Obstacles.empty()
+
+    # -- vehicles ------------------------------------------------------------------------------
+    def add_type(self, type_id: str, *, length: float, width: float, vclass: str,
+                 max_speed: float, accel: float | None = None, decel: float | None = None,
+                 emergency_decel: float | None = None,
+                 color: tuple[int, int, int, int] = (255, 0, 0, 255)) -> None:
+        """A vehicle type copied from SUMO's default, with these values."""
+        vt = self.sumo.vehicletype
+        vt.copy("DEFAULT_VEHTYPE", type_id)
+        vt.setLength(type_id, length)
+        vt.setWidth(type_id, width)
+        vt.setVehicleClass(type_id, vclass)
+        vt.setMaxSpeed(type_id, max_speed)
+        if accel is not None:
+            vt.setAccel(type_id, accel)
+        if decel is not None:
+            vt.setDecel(type_id, decel)
+        if emergency_decel is not None:
+            vt.setEmergencyDecel(type_id, emergency_decel)
+        vt.setColor(type_id, color)
+
+    def add_vehicle(self, vid: str, edges: list[str], *, type_id: str, depart: float,
+                    depart_pos: float, depart_lane: int, arrival_pos: float | None = None
+                    ) -> None:
+        """Insert a vehicle on its own route ``<vid>_route``, departing at rest."""
+        rid = f"{vid}_route"
+        self.sumo.route.add(rid, list(edges))
+        extra = {} if arrival_pos is None else {"arrivalPos": f"{arrival_pos:g}"}
+        self.sumo.vehicle.add(vid, rid, typeID=type_id, depart=f"{depart:g}",
+                              departPos=f"{depart_pos:g}", departLane=str(depart_lane),
+                              departSpeed="0", **extra)
+
+    def take_control(self, vid: str, *, subscribe_range: float, remote: bool,
+                     limits: tuple[float, float, float] | None = None) -> None:
+        """Subscribe to a planned vehicle and to the vehicles within ``subscribe_range`` [m]
+        of it; ``remote``: switch off SUMO's own speed and lane-change control of it.
+        ``limits``: its accel, decel, emergency decel [m/s²] (for a vehicle SUMO inserted
+        with its own type)."""
+        s, c = self.sumo, self.c
+        s.vehicle.subscribe(vid, [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_LANE_ID])
+        s.vehicle.subscribeContext(vid, c.CMD_GET_VEHICLE_VARIABLE, subscribe_range,
+                                   [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_LENGTH,
+                                    c.VAR_WIDTH, c.VAR_STOPSTATE])
+        if limits is not None:
+            s.vehicle.setAccel(vid, limits[0])
+            s.vehicle.setDecel(vid, limits[1])
+            s.vehicle.setEmergencyDecel(vid, limits[2])
+        if remote:
+            s.vehicle.setSpeedMode(vid, 0)
+            s.vehicle.setLaneChangeMode(vid, 0)
+
+    def release(self, vid: str) -> None:
+        """Stop the subscriptions of a vehicle (it left, or is no longer planned)."""
+        with contextlib.suppress(Exception):
+            self.sumo.vehicle.unsubscribe(vid)
+        with contextlib.suppress(Exception):
+            self.sumo.vehicle.unsubscribeContext(vid, self.c.CMD_GET_VEHICLE_VARIABLE, 0.0)
+
+    def pose(self, vid: str) -> tuple[FloatArray, float]:
+        """Front bumper ``(2,)`` [m] and heading [rad] of a vehicle, read now."""
+        front = np.asarray(self.sumo.vehicle.getPosition(vid), dtype=float)
+        return front, float(heading_from_sumo_angle(self.sumo.vehicle.getAngle(vid)))
+
+    def state(self, vid: str) -> VehicleState | None:
+        """A subscribed vehicle after the step, ``None`` if it is no longer in SUMO."""
+        t0 = time.perf_counter()
+        s, c = self.sumo, self.c
+        st = s.vehicle.getSubscriptionResults(vid)
+        try:  # subscription results outlive a removal until the next step
+            s.vehicle.getLaneID(vid)
+        except Exception:
+            st = None
+        self.seconds += time.perf_counter() - t0
+        if not st:
+            return None
+        fx, fy = st[c.VAR_POSITION]
+        return VehicleState((fx, fy), st[c.VAR_ANGLE], st[c.VAR_SPEED], st[c.VAR_LANE_ID])
+
+    def around(self, vid: str, stopped_speed: float) -> Others:
+        """The vehicles around ``vid`` (its context subscription, one call), as arrays."""
+        c = self.c
+        t0 = time.perf_counter()
+        res = self.sumo.vehicle.getContextSubscriptionResults(vid)
+        self.seconds += time.perf_counter() - t0
+        ids = [v for v in res or () if v != vid]
+        if not ids:
+            return NO_OTHERS
+        pos, ang, spd = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED
+        lng, wid, stop = c.VAR_LENGTH, c.VAR_WIDTH, c.VAR_STOPSTATE
+        a = np.array([(*v[pos], v[ang], v[lng], v[wid], v[spd], v[stop])
+                      for v in map(res.__getitem__, ids)], dtype=float)
+        return Others(ids, a, stopped_speed)
+
+    def signals(self, vid: str, lookahead: float, *, near: float = 0.0) -> Signals:
+        """Traffic lights and junction foes ahead of ``vid`` within ``lookahead`` [m]: the
+        foes it must yield to, farther than ``near`` [m] from their conflict area."""
+        s = self.sumo
+        t0 = time.perf_counter()
+        try:
+            lights: tuple[tuple[Any, ...], ...] | None = tuple(s.vehicle.getNextTLS(vid))
+        except Exception:
+            lights = None
+        foes: list[JunctionFoe] | None = []
+        try:
+            raw = s.vehicle.getJunctionFoes(vid, lookahead)
+        except Exception:  # an older SUMO, or the vehicle not on its route
+            raw = None
+            foes = None
+        for f in raw or ():
+            if not f[7] or f[1] <= near:
+                continue  # the vehicle has the way, or is at (or in) the area already
+            try:
+                v_f = s.vehicle.getSpeed(f[0])
+                len_f = s.vehicle.getLength(f[0])
+            except Exception:
+                continue
+            assert foes is not None
+            foes.append(JunctionFoe(f[0], f[1], f[2], f[3], f[4], bool(f[7]), v_f, len_f))
+        self.seconds += time.perf_counter() - t0
+        return Signals(lights, None if foes is None else tuple(foes))
+
+    def move(self, vid: str, edge: str, lane: int, centre: tuple[float, float], heading: float,
+             length: float, speed: float) -> None:
+        """Put a vehicle's centre at ``centre`` [m] with ``heading`` [rad] (``moveToXY`` of
+        its front bumper, keepRoute 3) and set its speed [m/s] (else SUMO infers one from
+        the move, measured along its lanes and capped by their speed limits)."""
+        x, y = centre
+        fx = x + length / 2.0 * math.cos(heading)
+        fy = y + length / 2.0 * math.sin(heading)
+        t0 = time.perf_counter()
+        try:
+            self.sumo.vehicle.moveToXY(vid, edge, lane, fx, fy, sumo_angle_from_heading(heading),
+                                       KEEP_ROUTE)
+            self.sumo.vehicle.setSpeed(vid, speed)
+        except Exception as err:
+            raise SumoError(f"SUMO refused to move vehicle '{vid}' at t={self.time:.1f} s: "
+                            f"{sumo_message(err)}") from err
+        finally:
+            self.seconds += time.perf_counter() - t0
+
+    def set_route(self, vid: str, edges: list[str]) -> None:
+        """Give a vehicle a new route (its current edge first)."""
+        try:
+            self.sumo.vehicle.setRoute(vid, list(edges))
+        except Exception as err:
+            raise SumoError(f"SUMO refused the new route: {sumo_message(err)}") from err
+
+    def remove(self, vid: str) -> None:
+        """Take a vehicle out of the simulation, with its subscriptions (never raises)."""
+        self.release(vid)
+        with contextlib.suppress(Exception):
+            self.sumo.vehicle.remove(vid)
+
+    def route_of(self, vid: str) -> tuple[tuple[str, ...], str, float, int, str]:
+        """A vehicle's route edges, its current edge, lane position [m], lane index and
+        type id."""
+        v = self.sumo.vehicle
+        return (tuple(v.getRoute(vid)), v.getRoadID(vid), float(v.getLanePosition(vid)),
+                int(v.getLaneIndex(vid)), v.getTypeID(vid))
+
+    def type_of(self, type_id: str) -> dict[str, Any]:
+        """Length, width [m], vehicle class and max speed [m/s] of a vehicle type."""
+        vt = self.sumo.vehicletype
+        return {"length": float(vt.getLength(type_id)), "width": float(vt.getWidth(type_id)),
+                "vclass": vt.getVehicleClass(type_id),
+                "max_speed": float(vt.getMaxSpeed(type_id))}
+
+    def type_sizes(self) -> dict[str, tuple[float, float]]:
+        """Length and width [m] of every vehicle type."""
+        vt = self.sumo.vehicletype
+        return {t: (float(vt.getLength(t)), float(vt.getWidth(t))) for t in vt.getIDList()}
+
+    def loaded_types(self, vids: list[str]) -> dict[str, str]:
+        """Type id of each loaded (not yet departed) vehicle id asked for."""
+        v = self.sumo.vehicle
+        out = {}
+        for vid in vids:
+            with contextlib.suppress(Exception):
+                out[vid] = v.getTypeID(vid)
+        return out
+
+    def speed(self, vid: str) -> float:
+        """A vehicle's speed [m/s], read now."""
+        return float(self.sumo.vehicle.getSpeed(vid))
+
+    def vehicle_ids(self) -> tuple[str, ...]:
+        """The vehicles in the simulation now."""
+        return tuple(self.sumo.vehicle.getIDList())
+
+    def expected(self) -> int:
+        """Vehicles in the simulation or still to come (``getMinExpectedNumber``)."""
+        return int(self.sumo.simulation.getMinExpectedNumber())
+
+    def loaded_ids(self) -> tuple[str, ...]:
+        """Vehicles loaded and not yet departed."""
+        return tuple(self.sumo.simulation.getPendingVehicles())
+
+    # -- stepping ------------------------------------------------------------------------------
+    def step(self) -> StepEvents:
+        """One simulation step."""
+        s = self.sumo
+        t0 = time.perf_counter()
+        try:
+            s.simulationStep()
+        except Exception as err:
+            raise SumoError(f"SUMO failed at t={self.time:.1f} s: {sumo_message(err)}") from err
+        self.time = float(s.simulation.getTime())
+        collisions = tuple({"time": self.time, "collider": c.collider, "victim": c.victim,
+                            "type": c.type, "lane": c.lane, "pos": c.pos}
+                           for c in s.simulation.getCollisions())
+        events = StepEvents(self.time, collisions,
+                            tuple(s.simulation.getStartingTeleportIDList()),
+                            tuple(s.simulation.getDepartedIDList()),
+                            tuple(s.simulation.getArrivedIDList()))
+        self.seconds += time.perf_counter() - t0
+        return events
+
+    def present(self, vid: str) -> bool:
+        """Whether a vehicle is in the simulation now."""
+        return vid in self.sumo.vehicle.getIDList()
+
+
+def stopped_vehicle_obstacles(
+    sumo: Any, vehicle_ids: Any = None, *, stopped_speed: float = 0.1
+) -> Obstacles:
+    """Obstacles of the stopped or parked vehicles of a running SUMO simulation.
+
+    Each is the oriented rectangle of the vehicle: SUMO's position (the middle of the front
+    bumper), angle (degrees, 0 = north, clockwise), length and width. A vehicle counts as
+    stopped when it is at a stop or parked and slower than ``stopped_speed`` [m/s].
+
+    Parameters
+    ----------
+    sumo
+        The ``libsumo`` (or ``traci``) module, with a simulation running.
+    vehicle_ids
+        Vehicles to look at; default every vehicle in the simulation.
+    """
+    ids = list(sumo.vehicle.getIDList() if vehicle_ids is None else vehicle_ids)
+    keep = [v for v in ids
+            if sumo.vehicle.getStopState(v) & 3 and sumo.vehicle.getSpeed(v) < stopped_speed]
+    if not keep:
+        return Obstacles.empty()
+    fronts = np.array([sumo.vehicle.getPosition(v) for v in keep], dtype=float)
+    heads = heading_from_sumo_angle([sumo.vehicle.getAngle(v) for v in keep])
+    lens = np.array([sumo.vehicle.getLength(v) for v in keep], dtype=float)
+    wids = np.array([sumo.vehicle.getWidth(v) for v in keep], dtype=float)
+    return Obstacles.from_boxes(fronts, heads, lens, wids, reference="front", ids=keep)
+
+
+def _safe_close(sumo_mod: Any) -> None:
+    with contextlib.suppress(Exception):
+        sumo_mod.close()
+
+
+def _tail(path: Path, n: int = 3) -> str:
+    try:
+        lines = [ln.strip() for ln in path.read_text().splitlines() if ln.strip()]
+    except OSError:
+        return ""
+    return " | ".join(lines[-n:])

@@ -1,0 +1,241 @@
+"""Several planned vehicles in one SUMO run (libsumo, small networks): sharing a road by
+separation, yielding to another's published plan, SUMO's own scenario with a share of 0,
+and bad input."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import libsumo
+import pytest
+import sumolib
+from conftest import NETS, ROOT
+
+from splineplan import cli
+from splineplan.errors import ParameterError, ScenarioError
+from splineplan.scenario import load_scenario, sumo_scenario
+from splineplan.sim import simulate
+
+SCENARIOS = ROOT / "scenarios"
+
+
+def _rows(path: Path) -> list[dict[str, float]]:
+    with path.open() as fh:
+        return [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+
+
+def _two(tmp_path: Path, a: str, b: str, *, duration: float = 60.0) -> Path:
+    """A scenario on the grid with planned vehicles ``a`` and ``b`` (TOML table bodies)."""
+    p = tmp_path / "two.toml"
+    p.write_text(f'network = "{NETS / "grid.net.xml"}"\n[[ego]]\nid = "a"\n{a}\n'
+                 f'[[ego]]\nid = "b"\n{b}\n[sim]\nduration = {duration}\nseed = 1\n')
+    return p
+
+
+def test_two_planned_vehicles_side_by_side(tmp_path: Path) -> None:
+    """Two planned vehicles start side by side on a two-lane road and drive the same way:
+    both arrive, and their footprints keep the safety margin (SUMO's FCD, measured by the
+    run's pairwise check) while they drive beside each other."""
+    sc = load_scenario(SCENARIOS / "two_side_by_side.toml")
+    r = simulate(sc, out_dir=tmp_path, progress=False)
+    assert r.arrived, r.reason
+    assert set(r.vehicles) == {"a", "b"}
+    margin = sc.roadmap.safety_margin
+    for vid, v in r.vehicles.items():
+        assert v.metrics["collisions"] == 0 and v.metrics["time_off_road"] == 0.0, vid
+        assert (tmp_path / vid / "metrics.json").is_file()
+    pairs = r.metrics["pairs"]
+    assert pairs["min_gap_planned"]["value"] >= margin - 1e-3
+    assert pairs["collision_pairs_planned"] == []
+    # they did drive beside each other: at some time, less than a car length apart along
+    # the road and more than a car width apart across it
+    a = {round(row["t"], 1): row for row in _rows(tmp_path / "a" / "trajectory.csv")}
+    b = {round(row["t"], 1): row for row in _rows(tmp_path / "b" / "trajectory.csv")}
+    beside = [t for t in a.keys() & b.keys()
+              if abs(a[t]["station"] - b[t]["station"]) < sc.ego.length
+              and abs(a[t]["lateral"] - b[t]["lateral"]) > sc.ego.width + margin]
+    assert len(beside) >= 10
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["planned"] == 2 and summary["arrived"] == 2
+    assert (tmp_path / "tripinfo.xml").stat().st_size > 0
+
+
+def test_planned_vehicle_yields_to_published_plan(tmp_path: Path) -> None:
+    """At a crossing, the vehicle planned second ('b') waits for the published plan of the
+    first ('a'): it replans while waiting, crosses after 'a' has, keeps the margin, and
+    never brakes harder than its comfortable limit (it yields in time)."""
+    path = _two(tmp_path, 'start_edge = "A1B1"\nstart_pos = 30.0\ngoal_edge = "B1C1"',
+                'start_edge = "B0B1"\nstart_pos = 30.0\ngoal_edge = "B1B2"')
+    sc = load_scenario(path)
+    r = simulate(sc, out_dir=tmp_path / "out", progress=False)
+    assert r.arrived, r.reason
+    b = r.vehicles["b"].metrics
+    waits = [p for p in b["replans"] if p["reason"] == "cooperation"]
+    assert waits and all("'a'" in p["detail"] for p in waits)
+    assert r.metrics["pairs"]["min_gap_planned"]["value"] >= sc.roadmap.safety_margin - 1e-3
+    # at its comfortable braking limit (5 % for the step where a new plan takes over from
+    # the old), far from the emergency braking (twice that) of a late reaction
+    assert b["max_longitudinal_acceleration"] <= 1.05 * sc.trajectory.b_max
+    # where the paths cross: 'a' drives east at a constant y, 'b' north at a constant x;
+    # 'a' has cleared b's way (its rear beyond b's side) before b's front reaches a's way
+    a_rows = _rows(tmp_path / "out" / "a" / "trajectory.csv")
+    b_rows = _rows(tmp_path / "out" / "b" / "trajectory.csv")
+    y_a, x_b = a_rows[0]["y"], b_rows[0]["x"]
+    clear = (sc.ego.length + sc.ego.width) / 2.0
+    a_out = min(row["t"] for row in a_rows if row["x"] > x_b + clear)
+    b_in = min(row["t"] for row in b_rows if row["y"] > y_a - clear)
+    assert a_out <= b_in
+
+
+def _small_cfg(tmp_path: Path, end: float = 60.0) -> Path:
+    cfg = tmp_path / "city.sumocfg"
+    cfg.write_text(f"""<configuration><input>
+  <net-file value="{NETS / 'city.net.xml'}"/>
+  <route-files value="{SCENARIOS / 'city.rou.xml'}"/>
+</input><time><begin value="0"/><end value="{end:g}"/><step-length value="0.1"/></time>
+</configuration>""")
+    return cfg
+
+
+def _trips(path: Path) -> list[dict[str, str]]:
+    return [dict(t.attrib) for t in ET.parse(path).getroot().iter("tripinfo")]
+
+
+def test_share_zero_reproduces_sumo(tmp_path: Path) -> None:
+    """No planned vehicle: the run is SUMO's own, the same tripinfo as SUMO's binary on the
+    same configuration and seed."""
+    cfg = _small_cfg(tmp_path, end=90.0)
+    r = simulate(sumo_scenario(cfg), out_dir=tmp_path / "ours", share=0.0, seed=3,
+                 progress=False)
+    assert r.metrics["planned"] == 0
+    plain = tmp_path / "plain.xml"
+    subprocess.run([sumolib.checkBinary("sumo"), "-c", str(cfg), "--seed", "3",
+                    "--tripinfo-output", str(plain), "--no-step-log", "true"],
+                   check=True, capture_output=True)
+    # the same trips; the devices differ by name only (ours also writes FCD)
+    ours = _trips(tmp_path / "ours" / "tripinfo.xml")
+    theirs = _trips(plain)
+    assert len(ours) >= 10
+    for t in (*ours, *theirs):
+        t.pop("devices")
+    assert ours == theirs
+
+
+def test_share_plans_a_seeded_draw(tmp_path: Path) -> None:
+    """A share draws the same passenger vehicles for the same seed; each planned one starts
+    where SUMO inserted it and heads for its route's last edge."""
+    cfg = _small_cfg(tmp_path, end=40.0)
+    r1 = simulate(sumo_scenario(cfg), out_dir=tmp_path / "one", share=0.5, seed=5,
+                  progress=False)
+    r2 = simulate(sumo_scenario(cfg), out_dir=tmp_path / "two", share=0.5, seed=5,
+                  progress=False)
+    assert r1.vehicles and set(r1.vehicles) == set(r2.vehicles)
+    assert not any(v.startswith("bus") for v in r1.vehicles)  # passenger vehicles only
+    for v in r1.vehicles.values():
+        assert v.metrics["collisions"] == 0
+        assert v.metrics["depart_time"] is not None
+
+
+# ---- bad input ------------------------------------------------------------------------------
+
+def _cli(*args: str) -> int:
+    return cli.main(["simulate", *args, "--no-progress"])
+
+
+def test_unknown_vehicle_id_and_type(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                     ) -> None:
+    cfg = _small_cfg(tmp_path)
+    assert _cli(str(cfg), "--vehicles", "nobody", "--out", str(tmp_path / "o")) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown vehicle id 'nobody'" in err[0]
+    assert _cli(str(cfg), "--vtype", "truck", "--out", str(tmp_path / "o")) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown vehicle type 'truck'" in err[0]
+    # a flow's vehicle is known by <flow id>.<n>
+    with pytest.raises(ScenarioError, match=r"'same\.x\.y'"):
+        simulate(sumo_scenario(cfg), out_dir=tmp_path / "p", vehicles=("same.x.y",),
+                 progress=False)
+
+
+@pytest.mark.parametrize("share", ["1.5", "-0.1", "nan"])
+def test_share_outside_unit_interval(tmp_path: Path, share: str,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = _small_cfg(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        _cli(str(cfg), "--share", share, "--out", str(tmp_path / "o"))
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--share" in err[0]
+    with pytest.raises(ParameterError, match="--share"):
+        simulate(sumo_scenario(cfg), out_dir=tmp_path / "p", share=2.0, progress=False)
+
+
+def test_sumocfg_sumo_rejects(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    cfg = tmp_path / "bad.sumocfg"
+    cfg.write_text(f"""<configuration><input>
+  <net-file value="{NETS / 'city.net.xml'}"/>
+</input><processing><no-such-option value="1"/></processing></configuration>""")
+    assert _cli(str(cfg), "--share", "0.5", "--out", str(tmp_path / "o")) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "SUMO failed to start" in err[0]
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["status"] == "failed" and "SUMO failed to start" in summary["reason"]
+
+
+def test_planned_vehicle_removed_by_sumo(tmp_path: Path) -> None:
+    """One of two planned vehicles is removed from outside: it fails, saying so in one
+    line; the other drives on and arrives; all outputs are written."""
+    sc = load_scenario(SCENARIOS / "two_side_by_side.toml")
+
+    def remove(t: float) -> None:
+        if abs(t - 5.0) < 1e-6:
+            libsumo.vehicle.remove("b")
+
+    r = simulate(sc, out_dir=tmp_path, progress=False, on_step=remove)
+    b = r.vehicles["b"]
+    assert b.status == "failed" and "'b' left the simulation at t=5.0 s" in b.reason
+    assert "\n" not in b.reason
+    assert r.vehicles["a"].arrived and r.status == "failed"
+    rows = _rows(tmp_path / "b" / "trajectory.csv")
+    assert rows and rows[-1]["t"] <= 5.0
+    assert json.loads((tmp_path / "summary.json").read_text())["statuses"] == {
+        "arrived": 1, "failed": 1}
+
+
+def test_single_ego_keeps_its_layout(tmp_path: Path) -> None:
+    """One [ego] table: the outputs stay in the folder itself (no summary)."""
+    r = simulate(load_scenario(SCENARIOS / "empty_road.toml"), out_dir=tmp_path,
+                 progress=False)
+    assert r.arrived and not r.vehicles
+    assert (tmp_path / "metrics.json").is_file() and not (tmp_path / "summary.json").exists()
+
+
+def test_duplicate_ego_ids(tmp_path: Path) -> None:
+    p = tmp_path / "dup.toml"
+    p.write_text(f'network = "{NETS / "grid.net.xml"}"\n'
+                 '[[ego]]\nstart_edge = "A0B0"\ngoal_edge = "C0D0"\nid = "x"\n'
+                 '[[ego]]\nstart_edge = "A1B1"\ngoal_edge = "C1D1"\nid = "x"\n')
+    with pytest.raises(ScenarioError, match="two planned vehicles with id 'x'"):
+        load_scenario(p)
+
+
+
+
+def test_ego_tables_default_ids_and_dimensions(tmp_path: Path) -> None:
+    """[[ego]] tables without ids are 'ego', 'ego2', ...; each planned vehicle's level 2
+    uses its own footprint and level 3 at most its own top speed."""
+    p = tmp_path / "three.toml"
+    p.write_text(f'network = "{NETS / "grid.net.xml"}"\n'
+                 '[[ego]]\nstart_edge = "A0B0"\ngoal_edge = "C0D0"\n'
+                 '[[ego]]\nstart_edge = "A1B1"\ngoal_edge = "C1D1"\nlength = 6.0\n'
+                 'max_speed = 10.0\n'
+                 '[[ego]]\nstart_edge = "A2B2"\ngoal_edge = "C2D2"\n')
+    sc = load_scenario(p)
+    assert [e.id for e in sc.egos] == ["ego", "ego2", "ego3"] and sc.ego is sc.egos[0]
+    second = sc.for_vehicle(sc.egos[1])
+    assert second.roadmap.vehicle_length == 6.0 and second.trajectory.s_max == 10.0
+    assert sc.for_vehicle(sc.egos[2]).trajectory.s_max == sc.trajectory.s_max
