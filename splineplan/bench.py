@@ -8,10 +8,10 @@ lane-change model) and ``sublane`` (SUMO's sublane model, which may shift within
 
 Every run, one case and one driver, runs in a fresh Python process (libsumo holds one
 simulation per process), whichever executor hands the runs out: a local pool of
-``workers`` threads that each start such processes, or a Dask cluster (``scheduler``
-address; the workers must see the output folder and the scenario files, as on one machine
-or a shared file system). Rows come back sorted by case and driver, so that the results do
-not depend on the executor; all randomness comes from the seeds.
+``workers`` threads that each start such processes, or a Ray cluster (``address``; its
+nodes must have splineplan installed and see the output folder and the scenario files, as
+on one machine or a shared file system). Rows come back sorted by case and driver, so that
+the results do not depend on the executor; all randomness comes from the seeds.
 
 Outputs: ``runs.csv`` and ``runs.json`` (one row per run), ``summary.md`` (a table by
 difficulty tier and driver; a success is a safe arrival: no collision, no time off the
@@ -22,20 +22,13 @@ three files are written for the runs that finished.
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import json
 import logging
 import math
-import os
-import signal
-import subprocess
-import sys
-import threading
 import time
 import xml.etree.ElementTree as ET
-from collections.abc import Callable, Generator, Mapping, Sequence
-from concurrent.futures import ThreadPoolExecutor, as_completed, wait
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -45,6 +38,7 @@ import numpy as np
 from splineplan import fields as fld
 from splineplan._signals import sigint_ignored
 from splineplan.errors import Interrupted, ParameterError
+from splineplan.executor import run_tasks
 
 log = logging.getLogger(__name__)
 
@@ -89,9 +83,6 @@ TIMING_FIELDS = ("wall_time", "wall_planner", "wall_sumo", "wall_loop", "plan_ti
                  "plan_time_max", "plan_time_total")
 #: Row fields that depend on where the outputs went.
 PLACE_FIELDS = ("run_dir",)
-#: Seconds a Ctrl-C gives the runs in hand to write their partial outputs before their
-#: processes are killed.
-STOP_GRACE = 5.0
 #: Columns of ``runs.csv``, in order. ``arrived``: the ego reached its goal; ``safe``: it
 #: arrived without a collision (the closed loop's footprint check) and without time off
 #: the road, what the summary counts as a success.
@@ -151,7 +142,7 @@ class BenchResult:
     wall_time
         Wall time [s] of the whole suite.
     executor
-        ``local (N workers)`` or ``dask (ADDRESS)``.
+        ``local (N workers)`` or ``ray (ADDRESS)``.
     files
         Files written (``runs.csv``, ``runs.json``, ``summary.md``, figures).
     interrupted
@@ -311,7 +302,7 @@ def build_suite(
 
 # ---- one run ------------------------------------------------------------------------------
 
-def run_one(task: Mapping[str, Any]) -> dict[str, Any]:
+def run_task(task: Mapping[str, Any]) -> dict[str, Any]:
     """Run one case with one driver in this process; a row of :data:`COLUMNS`.
 
     ``task``: ``case`` (a :class:`BenchCase` as a dict), ``driver``, ``run_dir``. Errors are
@@ -340,6 +331,13 @@ def run_one(task: Mapping[str, Any]) -> dict[str, Any]:
                                                   load_scenario(case.scenario))
         except Exception:
             pass
+    return row
+
+
+def failed_row(task: Mapping[str, Any], message: str) -> dict[str, Any]:
+    """The row of a run that could not make its own (its process died, or never ran)."""
+    row = _row_head(BenchCase(**task["case"]), str(task["driver"]), Path(task["run_dir"]))
+    row["error"] = row["reason"] = message
     return row
 
 
@@ -470,183 +468,12 @@ def _vtype_dims(scenario: Any) -> dict[str, tuple[float, float]]:
     return dims
 
 
-# ---- executors ----------------------------------------------------------------------------
-
-class _Processes:
-    """The worker processes a local pool has running, so that Ctrl-C can stop them."""
-
-    def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._live: set[subprocess.Popen[str]] = set()
-        self.stopping = False
-
-    def start(self, cmd: list[str], **kwargs: Any) -> subprocess.Popen[str] | None:
-        """Start a process, unless the pool is stopping (then ``None``)."""
-        with self._lock:
-            if self.stopping:
-                return None
-            proc = subprocess.Popen(cmd, **kwargs)
-            self._live.add(proc)
-            return proc
-
-    def done(self, proc: subprocess.Popen[str]) -> None:
-        with self._lock:
-            self._live.discard(proc)
-
-    def interrupt(self) -> None:
-        """Start no more processes; Ctrl-C (SIGINT) to those running, so that each closes
-        SUMO and writes the partial record of its run."""
-        with self._lock:
-            self.stopping = True
-            live = list(self._live)
-        for proc in live:
-            with contextlib.suppress(OSError):  # already gone
-                proc.send_signal(signal.SIGINT if os.name == "posix" else signal.SIGTERM)
-
-    def kill(self) -> None:
-        with self._lock:
-            live = list(self._live)
-        for proc in live:
-            with contextlib.suppress(OSError):
-                proc.kill()
-
-
-def execute_task(task: Mapping[str, Any], *, timeout: float = 1800.0,
-                 processes: _Processes | None = None) -> dict[str, Any]:
-    """Run one task in a fresh Python process (``python -m splineplan.bench TASK.json``).
-
-    The row comes back through ``row.json`` in the run folder; a process that dies without
-    writing it gives a failed row with the end of its error output. This function is what
-    every executor calls (a thread of the local pool, a Dask worker). The process runs in
-    a session of its own, so that a Ctrl-C in the terminal reaches only the suite, which
-    stops its runs itself (``processes``, the local pool's).
-    """
-    run_dir = Path(task["run_dir"])
-    run_dir.mkdir(parents=True, exist_ok=True)
-    task_file = run_dir / "task.json"
-    row_file = run_dir / "row.json"
-    task_file.write_text(json.dumps(task, indent=1))
-    row_file.unlink(missing_ok=True)
-    env = dict(os.environ)
-    pkg_root = str(Path(__file__).resolve().parent.parent)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (pkg_root, env.get("PYTHONPATH")) if p)
-    t0 = time.perf_counter()
-    cmd = [sys.executable, "-m", "splineplan.bench", str(task_file)]
-    kwargs: dict[str, Any] = {"stdout": subprocess.PIPE, "stderr": subprocess.PIPE,
-                              "text": True, "env": env,
-                              "start_new_session": os.name == "posix"}
-    proc = (processes.start(cmd, **kwargs) if processes is not None
-            else subprocess.Popen(cmd, **kwargs))
-    if proc is None:  # the suite is stopping
-        row = _row_head(BenchCase(**task["case"]), str(task["driver"]), run_dir)
-        row["error"] = row["reason"] = "not run: the suite was interrupted"
-        return row
-    try:
-        stdout, stderr = proc.communicate(timeout=timeout)
-        detail = (stderr or stdout or "").strip().splitlines()
-        code: int | str = proc.returncode
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.communicate()
-        detail, code = [f"the run took longer than {timeout:g} s"], "timeout"
-    finally:
-        if processes is not None:
-            processes.done(proc)
-    wall = time.perf_counter() - t0
-    if row_file.is_file():
-        row = json.loads(row_file.read_text())
-    else:
-        row = _row_head(BenchCase(**task["case"]), str(task["driver"]), run_dir)
-        msg = detail[-1] if detail else ""
-        row.update({"error": f"worker process ended ({code}) without a result: {msg}"[:500],
-                    "wall_time": wall})
-        row["reason"] = row["error"]
-    row["process_wall_time"] = wall
-    return row
-
-
-def _worker_main(argv: Sequence[str]) -> int:
-    # the suite stops its runs with SIGINT, also where it was itself started ignoring
-    # Ctrl-C (in the background of a shell, under nohup): the run takes it whatever the
-    # inherited disposition
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    task = json.loads(Path(argv[0]).read_text())
-    try:
-        row = run_one(task)
-    except KeyboardInterrupt:  # the suite stops: the run wrote its partial record
-        return 130
-    Path(task["run_dir"], "row.json").write_text(json.dumps(row, indent=1, allow_nan=False))
-    return 0
-
+# ---- runs ---------------------------------------------------------------------------------
 
 def _tasks(cases: Sequence[BenchCase], drivers: Sequence[str],
            out_dir: Path) -> list[dict[str, Any]]:
-    return [{"case": asdict(c), "driver": d, "run_dir": str(out_dir / "runs" / c.name / d)}
-            for c in cases for d in drivers]
-
-
-#: Rows as the runs finish: (index of the task, row).
-_Rows = Generator[tuple[int, dict[str, Any]], None, None]
-
-
-def _local(tasks: list[dict[str, Any]], workers: int,
-           started: Callable[[int], None]) -> _Rows:
-    """Rows as the runs finish, from a pool of threads that each run one process at a
-    time. When the consumer stops (Ctrl-C), the runs not started are cancelled and those
-    running get :data:`STOP_GRACE` seconds to write their partial records."""
-    processes = _Processes()
-
-    def job(i: int) -> dict[str, Any]:
-        if not processes.stopping:
-            started(i)
-        return execute_task(tasks[i], processes=processes)
-
-    pool = ThreadPoolExecutor(max_workers=workers)
-    futures = {pool.submit(job, i): i for i in range(len(tasks))}
-    try:
-        for fut in as_completed(futures):
-            yield futures[fut], fut.result()
-    finally:
-        with sigint_ignored():  # a second Ctrl-C must not leave the processes running
-            processes.interrupt()
-            pool.shutdown(wait=False, cancel_futures=True)
-            # a cancelled future never counts as done for wait(): wait for the others
-            _, late = wait([f for f in futures if not f.cancelled()], timeout=STOP_GRACE)
-            if late:
-                processes.kill()
-                wait(late, timeout=STOP_GRACE)
-
-
-def _dask(tasks: list[dict[str, Any]], address: str) -> _Rows:
-    try:
-        from distributed import Client
-        from distributed import as_completed as dask_completed
-    except ImportError as err:
-        raise ParameterError(
-            "--scheduler needs dask.distributed: pip install 'splineplan[dask]'") from err
-    try:
-        client = Client(address, timeout=30)
-    except (OSError, TimeoutError) as err:
-        raise ParameterError(f"cannot reach the Dask scheduler at {address}: {err}") from err
-    futures: list[Any] = []
-    try:
-        futures = [client.submit(execute_task, t, pure=False, key=f"bench-{i}-{t['driver']}-"
-                                 f"{t['case']['name']}") for i, t in enumerate(tasks)]
-        index = {f.key: i for i, f in enumerate(futures)}
-        for fut in dask_completed(futures):
-            i = index[fut.key]
-            try:
-                row = fut.result()
-            except Exception as err:  # the worker itself died: a failed row
-                t = tasks[i]
-                row = _row_head(BenchCase(**t["case"]), t["driver"], Path(t["run_dir"]))
-                row["error"] = row["reason"] = f"Dask task failed: {type(err).__name__}: {err}"
-            yield i, row
-    finally:
-        pending = [f for f in futures if not f.done()]
-        if pending:  # stopped early (Ctrl-C): no more runs on the cluster
-            client.cancel(pending)
-        client.close()
+    return [{"runner": __name__, "case": asdict(c), "driver": d,
+             "run_dir": str(out_dir / "runs" / c.name / d)} for c in cases for d in drivers]
 
 
 def run_suite(
@@ -655,7 +482,7 @@ def run_suite(
     out_dir: str | Path,
     drivers: Sequence[str] = DRIVERS,
     workers: int | None = None,
-    scheduler: str | None = None,
+    address: str | None = None,
     progress: bool = True,
     plots: bool = True,
 ) -> BenchResult:
@@ -663,8 +490,9 @@ def run_suite(
     and (``plots``) the figures into ``out_dir``.
 
     ``workers``: processes at a time on this machine (default: the number of cores);
-    ``scheduler``: a Dask scheduler's address (``tcp://HOST:PORT``) instead. ``progress``:
-    a progress bar on stderr naming the case in hand.
+    ``address``: a Ray cluster's address (``HOST:PORT`` or ``ray://HOST:PORT``) instead
+    (:mod:`splineplan.executor`). ``progress``: a progress bar on stderr naming the case in
+    hand.
 
     Raises
     ------
@@ -677,71 +505,19 @@ def run_suite(
     bad = [d for d in drivers if d not in DRIVERS]
     if bad or not drivers:
         raise ParameterError(f"unknown driver(s) {bad}; known: {', '.join(DRIVERS)}")
-    if workers is not None and workers < 1:
-        raise ParameterError(f"workers must be >= 1, got {workers}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     tasks = _tasks(cases, drivers, out.resolve())
-    for t in tasks:  # a row of an earlier suite in the same folder is not one of this one
-        Path(t["run_dir"], "row.json").unlink(missing_ok=True)
-    n_workers = workers or os.cpu_count() or 1
-    executor = f"dask ({scheduler})" if scheduler else f"local ({n_workers} workers)"
-    bar = _bar(len(tasks)) if progress else None
-    running: dict[int, str] = {}
-    lock = threading.Lock()
-
-    def label(i: int) -> str:
-        return f"{tasks[i]['case']['name']} ({tasks[i]['driver']})"
-
-    def started(i: int) -> None:
-        with lock:
-            running[i] = label(i)
-            if bar is not None:
-                bar.set_postfix_str(", ".join(list(running.values())[:3]), refresh=True)
-
-    rows: list[dict[str, Any] | None] = [None] * len(tasks)
-    t0 = time.perf_counter()
-    stream = _dask(tasks, scheduler) if scheduler else _local(tasks, n_workers, started)
-    interrupted = False
-    try:
-        for i, row in stream:
-            rows[i] = row
-            with lock:
-                running.pop(i, None)
-                if bar is not None:
-                    bar.set_description_str(f"done {label(i)}: {row['status']}")
-                    bar.set_postfix_str(", ".join(list(running.values())[:3]))
-                    bar.update(1)
-            log.info("%s: %s %s", label(i), row["status"], row.get("error") or "")
-    except KeyboardInterrupt:
-        interrupted = True
-    finally:
-        if bar is not None:
-            bar.close()
-    if interrupted:
-        with sigint_ignored():  # stop the runs in hand, write what has finished
-            stream.close()
-            _finished_since(tasks, rows)
-            result = _result(rows, cases, drivers, time.perf_counter() - t0, executor,
-                             out, plots=False, interrupted=True)
+    ran = run_tasks(tasks, workers=workers, address=address, progress=progress,
+                    label=lambda i: f"{tasks[i]['case']['name']} ({tasks[i]['driver']})")
+    if ran.interrupted:
+        with sigint_ignored():  # write what has finished
+            result = _result(ran.rows, cases, drivers, ran.wall_time, ran.executor, out,
+                             plots=False, interrupted=True)
         raise Interrupted(f"interrupted after {len(result.rows)} of {result.runs_planned} "
                           f"runs; runs.csv, runs.json and summary.md of those are in {out}",
                           result)
-    return _result(rows, cases, drivers, time.perf_counter() - t0, executor, out,
-                   plots=plots)
-
-
-def _finished_since(tasks: Sequence[Mapping[str, Any]], rows: list[dict[str, Any] | None]
-                    ) -> None:
-    """Fill in the rows of the runs that finished after the last row was taken in (a run
-    writes ``row.json`` only when it has finished; an interrupted one writes none)."""
-    for i, task in enumerate(tasks):
-        row_file = Path(task["run_dir"]) / "row.json"
-        if rows[i] is None and row_file.is_file():
-            try:
-                rows[i] = json.loads(row_file.read_text())
-            except (OSError, ValueError):
-                continue
+    return _result(ran.rows, cases, drivers, ran.wall_time, ran.executor, out, plots=plots)
 
 
 def _result(rows: Sequence[dict[str, Any] | None], cases: Sequence[BenchCase],
@@ -755,12 +531,6 @@ def _result(rows: Sequence[dict[str, Any] | None], cases: Sequence[BenchCase],
     files = write_outputs(result, out, plots=plots)
     return BenchResult(done, tuple(cases), tuple(drivers), wall, executor, tuple(files),
                        interrupted=interrupted)
-
-
-def _bar(total: int) -> Any:
-    from tqdm import tqdm
-
-    return tqdm(total=total, unit="run", file=sys.stderr, dynamic_ncols=True)
 
 
 # ---- outputs ------------------------------------------------------------------------------
@@ -940,6 +710,3 @@ def read_runs_csv(path: str | Path) -> list[dict[str, Any]]:
             rows.append(row)
     return rows
 
-
-if __name__ == "__main__":
-    sys.exit(_worker_main(sys.argv[1:]))

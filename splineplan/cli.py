@@ -560,8 +560,10 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", type=_int_in(1), default=1, metavar="N", help="seeds 0..N-1 (1)")
     p.add_argument("--workers", type=_int_in(1), default=None, metavar="N",
                    help="runs at a time on this machine (default: number of cores)")
-    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                   help="run on a Dask cluster instead (needs splineplan[dask])")
+    p.add_argument("--address", metavar="HOST:PORT",
+                   help="run on a Ray cluster instead (its head's address, or ray://HOST:PORT "
+                        "for Ray Client; needs splineplan[ray])")
+    p.add_argument("--scheduler", help=argparse.SUPPRESS)
     p.add_argument("--out", default="bench_out", metavar="DIR", help="output folder (bench_out)")
     p.add_argument("--tiers", nargs="+", metavar="TIER",
                    help="only these tiers: bundled, empty, sparse, medium, dense, blocked")
@@ -573,13 +575,16 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
 
 def _cmd_bench(args: argparse.Namespace) -> int:
     from splineplan.bench import DRIVERS, build_suite, exit_status, run_suite, summarise
-    from splineplan.errors import Interrupted
+    from splineplan.errors import Interrupted, ParameterError
 
+    if args.scheduler:
+        raise ParameterError("--scheduler (Dask) is gone: bench runs on Ray clusters, "
+                             "give the cluster's address with --address")
     _out_dir(args.out)
     cases = build_suite(args.suite, seeds=args.seeds, tiers=args.tiers, out_dir=args.out)
     try:
         res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
-                        workers=args.workers, scheduler=args.scheduler,
+                        workers=args.workers, address=args.address,
                         progress=not args.no_progress)
     except Interrupted as stop:  # Ctrl-C: the finished runs are written
         print(f"splineplan bench: {stop}", file=sys.stderr)

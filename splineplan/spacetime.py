@@ -346,9 +346,11 @@ def speed_among(
     lim = np.asarray(v_limit, dtype=float)
     if a_max <= 0 or d_max <= 0 or dt <= 0:
         raise ParameterError("a_max, d_max and dt must be positive")
-    cap = speed_profile(st, lim, a_max=a_max, b_max=d_max, start_speed=max(v0, 0.0),
+    # the limits and the braking ahead of them; the forward pass brings the acceleration
+    cap = speed_profile(st, lim, a_max=1e9, b_max=d_max, start_speed=float(lim[0]),
                         end_speed=end_speed)
-    free = _forward(st, cap, t0, float(cap[0]), dt, None, a_max, d_max)
+    start = min(max(v0, 0.0), float(cap[0]))
+    free = _forward(st, cap, t0, start, dt, None, a_max, d_max)
     if not moving:
         return SpeedPlan(*free)
     span = min(max(max(float(o.t[-1]) if not o.stays else t0 + HORIZON for o in moving),
@@ -361,7 +363,7 @@ def speed_among(
     plan = free
     for _ in range(len(moving) + 1):
         wall, owner = _walls(occ, yielded, len(times))
-        plan = _forward(st, cap, t0, float(cap[0]), dt, wall, a_max, d_max)
+        plan = _forward(st, cap, t0, start, dt, wall, a_max, d_max)
         conflict = _first_conflict(plan, occ, wall, owner, moving)
         touched = _touched(plan, occ, exclude=yielded)
         if not touched:
@@ -488,13 +490,15 @@ def _plan_stations(t: FloatArray, s: FloatArray, times: FloatArray) -> FloatArra
 def retime(trajectory: Trajectory, moving: Sequence[MovingObstacle], params: TrajectoryParams,
            *, t0: float, length: float, width: float, margin: float,
            end_speed: float | None = None) -> tuple[Trajectory, SpeedPlan]:
-    """The same path with the speed of :func:`speed_among`: its times are from ``t0`` like
-    the trajectory's own (from 0); a wait is two samples at the same station."""
+    """The same path with the speed of :func:`speed_among`, from the trajectory's start
+    speed to at most ``end_speed`` (default: its own end speed). The result's times are
+    from ``t0`` like the trajectory's own (from 0); a wait is two samples at one station."""
     tr = trajectory
     lim = speed_limit(tr.s, tr.curvature, params)
     plan = speed_among(tr.s, tr.xy, tr.heading, lim, t0=t0, v0=float(tr.speed[0]),
                        moving=moving, length=length, width=width, margin=margin,
-                       a_max=params.a_max, d_max=params.b_max, end_speed=end_speed)
+                       a_max=params.a_max, d_max=params.b_max,
+                       end_speed=float(tr.speed[-1]) if end_speed is None else end_speed)
     return _with_plan(tr, plan, t0), plan
 
 
@@ -502,7 +506,7 @@ def _with_plan(tr: Trajectory, plan: SpeedPlan, t0: float) -> Trajectory:
     """``tr`` resampled at its own stations plus the stations where the plan waits, with the
     plan's times and speeds (a trajectory that the plan leaves unfinished ends there)."""
     t, s, v = plan.t - t0, plan.s, plan.v
-    stopped = (v <= 1e-9) & (np.arange(len(v)) > 0)
+    stopped = (v <= 1e-9) & (np.arange(len(v)) > 0) & (s < tr.s[-1] - 1e-9)  # not the end
     waits: list[tuple[float, float, float]] = []  # station, arrival, departure
     j = 0
     while j < len(v):

@@ -5,8 +5,15 @@ from __future__ import annotations
 import csv
 import itertools
 import json
+import os
+import signal
+import socket
 import statistics
+import subprocess
+import sys
+import time
 import typing
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -185,18 +192,57 @@ def test_blocked_field_sumo_default_driver_does_not_arrive(local: bench.BenchRes
     assert sumo["status"] == "timeout", sumo["reason"]
 
 
-def test_dask_local_cluster_gives_the_same_rows(
-        local: bench.BenchResult, suite_dir: Path, tmp_path: Path) -> None:
-    distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  host="127.0.0.1", dashboard_address=None) as cluster:
-        res = bench.run_suite(_cases(suite_dir), out_dir=tmp_path, drivers=DRIVERS,
-                              scheduler=cluster.scheduler_address, progress=False)
-    assert res.executor.startswith("dask")
+@pytest.fixture(scope="module")
+def ray_head(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
+    """A Ray head node of two CPUs on this machine, as a cluster's would be started."""
+    pytest.importorskip("ray")
+    ray_bin = Path(sys.executable).with_name("ray")
+    port = _free_port()
+    tmp = tmp_path_factory.mktemp("ray")
+    proc = subprocess.Popen(
+        [str(ray_bin), "start", "--head", "--block", f"--port={port}", "--num-cpus=2",
+         "--include-dashboard=false", "--disable-usage-stats", f"--temp-dir={tmp}"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 90.0
+        while True:  # until its control store listens
+            with socket.socket() as sock:
+                if sock.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            if proc.poll() is not None or time.monotonic() > deadline:
+                pytest.fail("the Ray head node did not start")
+            time.sleep(0.5)
+        yield f"127.0.0.1:{port}"
+    finally:
+        os.killpg(proc.pid, signal.SIGTERM)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def test_ray_cluster_gives_the_same_rows(
+        local: bench.BenchResult, suite_dir: Path, tmp_path: Path, ray_head: str) -> None:
+    res = bench.run_suite(_cases(suite_dir), out_dir=tmp_path, drivers=DRIVERS,
+                          address=ray_head, progress=False)
+    assert res.executor == f"ray ({ray_head})"
     _check_outputs(res)
     assert bench.comparable(res.rows) == bench.comparable(local.rows)
     assert bench.comparable(bench.read_runs_csv(tmp_path / "runs.csv")) == bench.comparable(
         bench.read_runs_csv(Path(local.files[0])))
+
+
+def test_an_unreachable_ray_cluster_is_one_clear_error(tmp_path: Path) -> None:
+    pytest.importorskip("ray")
+    with pytest.raises(ParameterError, match=r"cannot reach the Ray cluster at 127\.0\.0\.1:"):
+        bench.run_suite(_cases(tmp_path), out_dir=tmp_path / "out", drivers=("planner",),
+                        address=f"127.0.0.1:{_free_port()}", progress=False)
 
 
 def test_suite_building_and_bad_input(tmp_path: Path) -> None:

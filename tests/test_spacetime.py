@@ -7,6 +7,7 @@ of the module's own rectangle distance and occupancy.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -19,7 +20,8 @@ from splineplan.geometry import box_corners
 from splineplan.planner import plan_corridor
 from splineplan.roadmap import RoadmapParams
 from splineplan.spacetime import MovingObstacle, box_gap, published, retime, speed_among
-from splineplan.trajectory import Trajectory, TrajectoryParams
+from splineplan.speed import speed_profile
+from splineplan.trajectory import Trajectory, TrajectoryParams, speed_limit
 
 L, W, MARGIN = 4.5, 1.8, 0.5
 TP = TrajectoryParams(s_max=13.0)
@@ -181,6 +183,22 @@ def test_retime_waits_at_a_station_and_publishes_what_others_see() -> None:
     px, py, _, _ = new.at_time(times - 10.0)
     oxy, _, there = seen.at(times)
     assert there.all() and np.allclose(oxy, np.column_stack((px, py)), atol=1e-6)
+
+
+def test_without_obstacles_retime_keeps_the_trajectorys_own_profile() -> None:
+    """Two implementations of the same limits (speed.py's passes over the stations and the
+    forward pass in time here) agree."""
+    tr = corridor_plan()
+    for start in (0.0, 8.0):
+        base = replace(tr, speed=speed_profile(tr.s, speed_limit(tr.s, tr.curvature, TP),
+                                               a_max=TP.a_max, b_max=TP.b_max,
+                                               start_speed=start, end_speed=0.0))
+        new, plan = retime(base, [], TP, t0=3.0, length=L, width=W, margin=MARGIN)
+        assert plan.clear and not plan.yielded
+        _, _, _, v_base = base.at_station(new.s)
+        assert np.allclose(new.speed, v_base, atol=0.05)
+        assert new.t[-1] == pytest.approx(float(np.sum(2 * np.diff(base.s) / np.maximum(
+            base.speed[:-1] + base.speed[1:], 1e-9))), rel=0.01)
 
 
 def test_bad_moving_obstacles_are_refused() -> None:
