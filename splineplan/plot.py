@@ -1201,12 +1201,13 @@ def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | PathLike[str]) -> 
             ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes,
                     color="0.4")
         ax.set_ylabel(label)
-        ax.set_ylim(bottom=0.0)  # differences in proportion, not magnified
+        top = max([float(np.max(m + sd))] if xs else [1.0])
+        ax.set_ylim(0.0, 1.2 * top if top > 0 else 1.0)  # differences in proportion
         ax.set_xticks([100.0 * s for s in shares])
         ax.grid(True, lw=0.3, alpha=0.5)
     for ax in axes[2:]:
         ax.set_xlabel("planned vehicles [% of passenger cars]")
-    axes[0].legend(fontsize="small", loc="best")
+    axes[0].legend(fontsize="small", loc="lower right")
     fig.suptitle("Penetration sweep: traffic as a share of it is planned")
     out = Path(path)
     fig.savefig(out, dpi=120)
