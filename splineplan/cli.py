@@ -567,6 +567,10 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
                    help="run on a Ray cluster instead (its head's address, or ray://HOST:PORT "
                         "for Ray Client; needs splineplan[ray])")
     p.add_argument("--scheduler", help=argparse.SUPPRESS)
+    p.add_argument("--shares", nargs="+", type=float, metavar="SHARE",
+                   help="a penetration sweep of the scenario SUITE (.sumocfg or .toml) at "
+                        "these shares of planned vehicles, e.g. 0 0.1 0.25 0.5 1, over "
+                        "--seeds seeds: sweep.csv, sweep.json, sweep.md, sweep.png")
     p.add_argument("--out", default="bench_out", metavar="DIR", help="output folder (bench_out)")
     p.add_argument("--tiers", nargs="+", metavar="TIER",
                    help="only these tiers: bundled, empty, sparse, medium, dense, blocked")
@@ -584,6 +588,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
         raise ParameterError("--scheduler (Dask) is gone: bench runs on Ray clusters, "
                              "give the cluster's address with --address")
     _out_dir(args.out)
+    if args.shares is not None:
+        return _sweep(args)
     cases = build_suite(args.suite, seeds=args.seeds, tiers=args.tiers, out_dir=args.out)
     try:
         res = run_suite(cases, out_dir=args.out, drivers=tuple(args.drivers or DRIVERS),
@@ -657,6 +663,36 @@ def _cmd_commonroad(args: argparse.Namespace) -> int:
           f"{1e3 * res.plan_seconds:.1f} ms")
     print(f"written to {written}" + (f" and {out / (name + '.png')}" if args.plot else ""))
     return 0 if res.goal_reached else 1
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from splineplan.errors import Interrupted, ParameterError
+    from splineplan.sweep import build_sweep, run_sweep, summarise
+
+    if args.tiers or args.drivers:
+        raise ParameterError("--tiers and --drivers are for suites, not a sweep (--shares)")
+    points = build_sweep(args.suite, shares=args.shares, seeds=args.seeds)
+    try:
+        res = run_sweep(points, out_dir=args.out, workers=args.workers, address=args.address,
+                        progress=not args.no_progress)
+    except Interrupted as stop:
+        print(f"splineplan bench: {stop}", file=sys.stderr)
+        return 130
+    for s in summarise(res.rows):
+        tt = s["mean_travel_time"]
+        ttc = s["min_ttc"]
+        print(f"share {100 * s['share']:5.1f} %: {s['runs']} runs ({s['failed']} failed), "
+              f"planned {s['planned_arrived']}/{s['planned']} arrived, {s['collisions']} "
+              f"collisions, mean travel time {'-' if tt is None else f'{tt:.1f} s'}, "
+              f"smallest TTC {'-' if ttc is None else f'{ttc:.2f} s'}")
+    for r in res.rows:
+        if r["error"]:
+            print(f"failed: {r['name']}: {r['error']}")
+    print(f"{len(res.rows)} runs in {res.wall_time:.1f} s on {res.executor}")
+    print(f"written to {args.out}/ (sweep.csv, sweep.json, sweep.md, sweep.png)")
+    bad = any(r["status"] == "failed" or (r["collisions"] or 0) > 0
+              or (r["planned_arrived"] or 0) < (r["planned"] or 0) for r in res.rows)
+    return 1 if bad else 0
 
 
 # ---- end of commands --------------------------------------------------------------------

@@ -1246,3 +1246,46 @@ def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: A
     if path is not None:
         _save(ax, path)
     return fig
+
+
+def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | PathLike[str]) -> Path:
+    """Figure of a penetration sweep (rows of ``sweep.csv``, :mod:`splineplan.sweep`): mean
+    travel time, time loss, throughput and smallest time-to-collision against the share of
+    planned vehicles, each seed a dot and the mean over seeds a line with its standard
+    deviation as a band. Returns the file written."""
+    from splineplan.sweep import FIGURES
+
+    fig = Figure(figsize=(10.0, 6.5), layout="constrained")
+    axes = fig.subplots(2, 2, sharex=True).ravel()
+    shares = sorted({float(r["share"]) for r in rows})
+    for ax, (key, label) in zip(axes, FIGURES, strict=True):
+        xs, means, sds = [], [], []
+        for share in shares:
+            vals = [float(r[key]) for r in rows
+                    if float(r["share"]) == share and r.get(key) not in (None, "")]
+            ax.scatter([100.0 * share] * len(vals), vals, s=14, color="0.55", zorder=3,
+                       label="one seed" if share == shares[0] else None)
+            if vals:
+                xs.append(100.0 * share)
+                means.append(float(np.mean(vals)))
+                sds.append(float(np.std(vals, ddof=1)) if len(vals) > 1 else 0.0)
+        if xs:
+            m, sd = np.array(means), np.array(sds)
+            ax.fill_between(xs, m - sd, m + sd, color="tab:blue", alpha=0.15, lw=0,
+                            label="± 1 sd")
+            ax.plot(xs, m, color="tab:blue", marker="o", lw=1.8, label="mean over seeds")
+        else:
+            ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes,
+                    color="0.4")
+        ax.set_ylabel(label)
+        top = max([float(np.max(m + sd))] if xs else [1.0])
+        ax.set_ylim(0.0, 1.2 * top if top > 0 else 1.0)  # differences in proportion
+        ax.set_xticks([100.0 * s for s in shares])
+        ax.grid(True, lw=0.3, alpha=0.5)
+    for ax in axes[2:]:
+        ax.set_xlabel("planned vehicles [% of passenger cars]")
+    axes[0].legend(fontsize="small", loc="lower right")
+    fig.suptitle("Penetration sweep: traffic as a share of it is planned")
+    out = Path(path)
+    fig.savefig(out, dpi=120)
+    return out
