@@ -8,6 +8,7 @@ import numpy as np
 
 from splineplan.corridor import Corridor
 from splineplan.geometry import FloatArray
+from splineplan.network import CarShape
 from splineplan.obstacles import Obstacles
 from splineplan.sumo.world import Signals
 from splineplan.traffic import Others
@@ -99,3 +100,9 @@ class DriverState:
     _cand_was: list[int]
     _turn_key: tuple[Corridor, float] | None
     _turn_window: FloatArray
+
+    @property
+    def car(self) -> CarShape:
+        """The vehicle as level 1 sees it: which junction turns it can make."""
+        return CarShape(self.sc.ego.length, self.sc.ego.width,
+                        self.sc.trajectory.min_turn_radius)
