@@ -143,8 +143,13 @@ class Vehicle:
                        a_max=min(base.a_max, self.a_max), b_max=BRAKING)
 
     def roadmap_params(self) -> RoadmapParams:
-        """Level 2's parameters for this car's body."""
-        return RoadmapParams(vehicle_length=self.length, vehicle_width=self.width)
+        """Level 2's parameters for this car's body. The corridor is already the route's
+        own lanes, shifting at a lane change: level 2 keeps the paper's midpoints there
+        (``place=False``), which spread the lane change over the corridor's shift; placed
+        for a lane's centre, the vertices held the old lane and changed late (USA_US101-16
+        then missed its goal)."""
+        return RoadmapParams(vehicle_length=self.length, vehicle_width=self.width,
+                             place=False)
 
 
 @functools.lru_cache(maxsize=8)

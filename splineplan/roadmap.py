@@ -73,6 +73,10 @@ class RoadmapParams:
         Width [m] of a lane (SUMO's default 3.2 m): a road ``w`` wide holds
         ``round(w / lane_width)`` lanes (at least one), whose centres the chosen vertices
         keep on a free road (see :func:`place_vertices`).
+    place
+        Whether the chosen vertices are placed for the separation and the lane
+        (:func:`place_vertices`); ``False`` keeps the paper's midpoints of the free
+        intervals (a corridor that is already the route's own lanes, as CommonRoad's).
     """
 
     d: float = 1.0
@@ -83,6 +87,7 @@ class RoadmapParams:
     segment_length: float = 300.0
     road_margin: float = 0.0
     lane_width: float = 3.2
+    place: bool = True
 
     def __post_init__(self) -> None:
         for name in ("d", "wmax", "vehicle_length", "vehicle_width", "segment_length",
@@ -358,7 +363,7 @@ def _plan(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float
     )
     logger.debug("roadmap: %d lines, %d vertices, %d arcs, bottleneck %.2f m at s=%.1f m",
                  nline, len(vxy), len(arcs), out.bottleneck_width, out.bottleneck_s)
-    return out
+    return out if params.place else out.at_midpoints()
 
 
 # -- where the chosen vertices stand -----------------------------------------------------

@@ -89,6 +89,19 @@ def test_an_empty_multi_lane_road_keeps_the_lanes_centre() -> None:
     np.testing.assert_allclose(lat[far], 1.6, atol=0.05)
 
 
+def test_without_placing_the_vertices_are_the_papers_midpoints() -> None:
+    """``RoadmapParams(place=False)``: the same widest-then-shortest path, its vertices at
+    the free intervals' midpoints (on the empty 4-lane road: the road's middle)."""
+    from splineplan.roadmap import RoadmapParams, plan_roadmap
+
+    cor = straight(12.8, 200.0)
+    placed = plan_roadmap(cor, None, start_xy=[1.0, 2.0])
+    mid = plan_roadmap(cor, None, start_xy=[1.0, 2.0], params=RoadmapParams(place=False))
+    np.testing.assert_array_equal(mid.path, placed.path)
+    np.testing.assert_allclose(mid.xy, np.asarray(mid.graph_xy)[mid.path])
+    assert np.allclose(mid.l[5:], 0.0, atol=1e-9) and np.allclose(placed.l[-5:], 1.6, atol=0.05)
+
+
 @pytest.mark.slow
 @settings(max_examples=6, deadline=None)
 @given(seed=st.integers(0, 2**32 - 1))
