@@ -75,8 +75,12 @@ class RoadmapParams:
         keep on a free road (see :func:`place_vertices`).
     place
         Whether the chosen vertices are placed for the separation and the lane
-        (:func:`place_vertices`); ``False`` keeps the paper's midpoints of the free
-        intervals (a corridor that is already the route's own lanes, as CommonRoad's).
+        (:func:`place_vertices`: as far from obstacles as a car in the next lane keeps,
+        then from the road's edges, then the lane's centre). Off by default, the paper's
+        midpoints of the free intervals: placed, the vertices keep most of the best
+        clearance in tight passages, but the paths they give weave more (a blocked field
+        took 42 s instead of 34 s) and turned a planned vehicle's timely yield to another's
+        plan into a conflict that needs full braking.
     """
 
     d: float = 1.0
@@ -87,7 +91,7 @@ class RoadmapParams:
     segment_length: float = 300.0
     road_margin: float = 0.0
     lane_width: float = 3.2
-    place: bool = True
+    place: bool = False
 
     def __post_init__(self) -> None:
         for name in ("d", "wmax", "vehicle_length", "vehicle_width", "segment_length",

@@ -419,10 +419,11 @@ def _forward(s: FloatArray, cap: FloatArray, t0: float, v0: float, dt: float,
 @njit(cache=True)
 def _drive(s: FloatArray, cap: FloatArray, walls: FloatArray, floor: FloatArray, v0: float,
            dt: float, a_max: float, d_max: float) -> tuple[int, FloatArray, FloatArray]:
-    """The forward pass in time while a wall lies ahead: each step takes the highest speed
-    within the cap and the acceleration from which full braking stays behind every later
-    wall (:func:`_safe_speed`), or brakes fully where none does. Returns the steps taken and
-    the stations and speeds at steps ``0 .. n``."""
+    """The forward pass in time while a wall lies ahead: each step takes the highest of a
+    few accelerations (full, half, none, a quarter, half and all of the braking limit)
+    within the cap from which full braking stays behind every later wall
+    (:func:`_safe_speed`), or brakes fully where none does. Returns the steps taken and the
+    stations and speeds at steps ``0 .. n``."""
     m = walls.shape[0]
     end = s[-1]
     pos_out = np.empty(m + 1)
@@ -434,17 +435,18 @@ def _drive(s: FloatArray, cap: FloatArray, walls: FloatArray, floor: FloatArray,
     while j < m and floor[j] < np.inf and pos < end - 1e-9:
         j += 1
         vmax = max(np.interp(pos, s, cap), 0.0)
-        nv = min(vel + a_max * dt, vmax)
-        step = 0.5 * (vel + nv) * dt
-        if j < m:
-            for _ in range(3):  # the safe speed depends on where the step ends
-                safe = _safe_speed(pos + step, walls, floor, j, window, dt, d_max)
-                if nv <= safe + 1e-12:
-                    break
-                nv = max(safe, vel - d_max * dt, 0.0)
+        # the highest of a few accelerations from which full braking stays behind every
+        # later wall; full braking where none does (the conflict then shows)
+        nv, step = vel, 0.0
+        for k in range(6):
+            acc = (a_max, 0.5 * a_max, 0.0, -0.25 * d_max, -0.5 * d_max, -d_max)[k]
+            nv = min(max(vel + acc * dt, 0.0), vmax)
+            if acc < 0.0 and vel + acc * dt < 0.0:  # stops within the step
+                step = vel * vel / (-2.0 * acc)
+            else:
                 step = 0.5 * (vel + nv) * dt
-                if nv == 0.0 and vel < d_max * dt:  # stops within the step, braking fully
-                    step = vel * vel / (2.0 * d_max)
+            if j >= m or nv <= _safe_speed(pos + step, walls, floor, j, window, dt, d_max):
+                break
         pos += step
         vel = nv
         pos_out[j], vel_out[j] = pos, vel

@@ -37,8 +37,7 @@ def _cases(tmp: Path) -> list[bench.BenchCase]:
     """A sparse field, a field that blocks every lane, and a case naming a missing edge."""
     road = _road()
     a = bench.generated_case(road, "sparse", 3, tmp, index=0, duration=40.0)
-    # the planner weaves through it for the separation: 42 s (34 s when it kept less)
-    b = bench.generated_case(road, "blocked", 0, tmp, index=1, duration=60.0)
+    b = bench.generated_case(road, "blocked", 0, tmp, index=1, duration=40.0)
     broken = tmp / "missing_edge.toml"
     broken.write_text(f'name = "missing_edge"\nnetwork = "{NETS / "straight.net.xml"}"\n'
                       '[ego]\nstart_edge = "no_such_edge"\ngoal_edge = "e1"\n'

@@ -29,7 +29,9 @@ from splineplan.roadmap import (
 R_DEFAULT = RoadmapParams().inflation  # 1.2 m: obstacles
 R_ROAD = RoadmapParams().road_inflation  # 0.9 m: road edges
 #: Level 2 as the raster oracle sees it: road edges grown as much as the obstacles.
-EVEN = {"road_margin": RoadmapParams().safety_margin}
+EVEN = {"road_margin": RoadmapParams().safety_margin, "place": True}
+#: Level 2 with its chosen vertices placed for the separation and the lane.
+PLACED = RoadmapParams(place=True)
 
 
 # -- scenarios ---------------------------------------------------------------------------
@@ -100,7 +102,8 @@ def assert_consistent(rm: Roadmap) -> None:
     # the placed vertices stand in their free intervals and bands
     lo, hi = rm.graph_lo[rm.path], rm.graph_hi[rm.path]
     assert np.all((lo - 1e-9 <= rm.l) & (rm.l <= hi + 1e-9))
-    assert np.all((rm.band_lo - 1e-9 <= rm.l) & (rm.l <= rm.band_hi + 1e-9))
+    if len(rm.band_lo):  # placed (RoadmapParams.place)
+        assert np.all((rm.band_lo - 1e-9 <= rm.l) & (rm.l <= rm.band_hi + 1e-9))
     np.testing.assert_allclose(rm.width, (rm.graph_hi - rm.graph_lo)[rm.path])
     assert np.all(np.diff(rm.graph_line[rm.path]) == 1)
     assert rm.graph_line[rm.path[-1]] == rm.graph_line.max()
@@ -140,7 +143,7 @@ def test_empty_road_keeps_the_centre_of_the_vehicles_lane(left: float, right: fl
     for k in range(lanes):
         centre = right + (k + 0.5) * w
         start = (0.0, centre + 0.3 * w * (-1) ** k)  # off the centre, within the lane
-        rm = plan_roadmap(corridor, Obstacles.empty(), start)
+        rm = plan_roadmap(corridor, Obstacles.empty(), start, PLACED)
         assert_consistent(rm)
         np.testing.assert_allclose(rm.l, centre, atol=1e-9)
         np.testing.assert_allclose(rm.width, left - right - 2 * R_ROAD, atol=1e-9)
@@ -168,7 +171,7 @@ def test_one_obstacle_is_passed_on_the_wider_side_in_the_lane_beside_it(side: fl
     corridor = straight(100.0)
     # a car at l = +-1 covers |l| in [0.1, 1.9]; grown by 1.2 it covers [-1.1, 3.1]
     obs = Obstacles.from_boxes([[40.0, side]], [0.0], [4.5], [1.8])
-    rm = plan_roadmap(corridor, obs, (0.0, 0.0))
+    rm = plan_roadmap(corridor, obs, (0.0, 0.0), PLACED)
     assert_consistent(rm)
     beside = np.abs(rm.s - 40.0) <= 2.25 + R_DEFAULT - 0.01
     wide_gap = (-4.8 + R_ROAD, -1.1) if side > 0 else (1.1, 4.8 - R_ROAD)
@@ -203,7 +206,7 @@ def _gate_field() -> tuple[Corridor, Obstacles]:
 
 def test_field_is_crossed_by_the_widest_passage_not_the_shortest() -> None:
     corridor, obs = _gate_field()
-    rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5))
+    rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5, place=True))
     assert_consistent(rm)
     at_rows = (np.abs(rm.s - 42.0) <= 2.0) | (np.abs(rm.s - 62.0) <= 2.0)
     np.testing.assert_allclose(rm.graph_l[rm.path[at_rows]], (2.5 + 1.2 + 7.0 - R_ROAD) / 2,
@@ -214,7 +217,7 @@ def test_field_is_crossed_by_the_widest_passage_not_the_shortest() -> None:
 
 def test_with_small_wmax_the_field_is_crossed_by_the_shortest_passage() -> None:
     corridor, obs = _gate_field()
-    rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=0.5))
+    rm = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=0.5, place=True))
     assert_consistent(rm)
     at_rows = (np.abs(rm.s - 42.0) <= 2.0) | (np.abs(rm.s - 62.0) <= 2.0)
     np.testing.assert_allclose(rm.graph_l[rm.path[at_rows]], 0.0, atol=1e-9)
@@ -222,7 +225,7 @@ def test_with_small_wmax_the_field_is_crossed_by_the_shortest_passage() -> None:
     assert rm.params.enough_separation == pytest.approx(0.25)
     assert np.all(np.abs(rm.l[at_rows]) <= 0.3 - 0.25 + 1e-9)
     assert rm.bottleneck_width == pytest.approx(0.6)
-    wide = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5))
+    wide = plan_roadmap(corridor, obs, (0.0, 0.0), RoadmapParams(wmax=3.5, place=True))
 
     def searched(r: Roadmap) -> float:  # the length the search minimised (midpoints)
         return float(np.hypot(*np.diff(r.graph_xy[r.path], axis=0).T).sum())
@@ -232,7 +235,7 @@ def test_with_small_wmax_the_field_is_crossed_by_the_shortest_passage() -> None:
 
 def test_start_picks_the_interval_the_vehicle_is_in() -> None:
     corridor, obs = _gate_field()
-    rm = plan_roadmap(corridor, obs, (43.0, 5.0), RoadmapParams(wmax=0.5))
+    rm = plan_roadmap(corridor, obs, (43.0, 5.0), RoadmapParams(wmax=0.5, place=True))
     assert rm.s[0] == 43.0
     assert rm.graph_lo[rm.path[0]] <= 5.0 <= rm.graph_hi[rm.path[0]]
     # off the line: the first line at or ahead of the vehicle

@@ -26,6 +26,8 @@ from splineplan.trajectory import TrajectoryParams
 
 CAR_W = 1.8
 #: The oracle benchmark's vehicle: starts at 10 m/s, may drive 15 m/s.
+#: Level 2 with its chosen vertices placed for the separation and the lane.
+PLACED = RoadmapParams(place=True)
 TP = TrajectoryParams(s_max=15.0)
 
 
@@ -47,7 +49,8 @@ def test_a_passage_between_two_cars_keeps_its_separation(gap: float, centre: flo
     cor = straight(9.6)
     y = (centre - gap / 2 - CAR_W / 2, centre + gap / 2 + CAR_W / 2)
     obs = Obstacles.from_boxes([[at, y[0]], [at, y[1]]], [0.0, 0.0], 4.5, CAR_W)
-    plan = plan_corridor(cor, obs, [1.0, lane], 0.0, params=TP, start_speed=10.0,
+    plan = plan_corridor(cor, obs, [1.0, lane], 0.0, params=TP, roadmap_params=PLACED,
+                         start_speed=10.0,
                          end_speed=None)
     tr = plan.trajectory
     best = (gap - CAR_W) / 2
@@ -64,7 +67,8 @@ def test_one_car_in_the_lane_is_passed_in_the_next_lanes_centre(width: float,
     side of it."""
     cor = straight(width)
     obs = Obstacles.from_boxes([[60.0, lane]], [0.0], 4.5, CAR_W)
-    plan = plan_corridor(cor, obs, [1.0, lane], 0.0, params=TP, start_speed=10.0,
+    plan = plan_corridor(cor, obs, [1.0, lane], 0.0, params=TP, roadmap_params=PLACED,
+                         start_speed=10.0,
                          end_speed=None)
     tr = plan.trajectory
     assert tr.feasible
@@ -81,7 +85,8 @@ def test_an_empty_multi_lane_road_keeps_the_lanes_centre() -> None:
     """On an empty 4-lane road (12.8 m) the trajectory from an off-centre start settles on
     the centre of the vehicle's lane, not the road's middle (a lane line)."""
     cor = straight(12.8, 200.0)
-    tr = plan_corridor(cor, None, [1.0, 2.0], 0.0, params=TP, start_speed=10.0,
+    tr = plan_corridor(cor, None, [1.0, 2.0], 0.0, params=TP, roadmap_params=PLACED,
+                       start_speed=10.0,
                        end_speed=None).trajectory
     assert tr.feasible
     lat = cor.to_sl(tr.xy)[:, 1]
@@ -90,12 +95,13 @@ def test_an_empty_multi_lane_road_keeps_the_lanes_centre() -> None:
 
 
 def test_without_placing_the_vertices_are_the_papers_midpoints() -> None:
-    """``RoadmapParams(place=False)``: the same widest-then-shortest path, its vertices at
-    the free intervals' midpoints (on the empty 4-lane road: the road's middle)."""
-    from splineplan.roadmap import RoadmapParams, plan_roadmap
+    """``RoadmapParams(place=False)`` (the default): the same widest-then-shortest path,
+    its vertices at the free intervals' midpoints (on the empty 4-lane road: the road's
+    middle)."""
+    from splineplan.roadmap import plan_roadmap
 
     cor = straight(12.8, 200.0)
-    placed = plan_roadmap(cor, None, start_xy=[1.0, 2.0])
+    placed = plan_roadmap(cor, None, start_xy=[1.0, 2.0], params=PLACED)
     mid = plan_roadmap(cor, None, start_xy=[1.0, 2.0], params=RoadmapParams(place=False))
     np.testing.assert_array_equal(mid.path, placed.path)
     np.testing.assert_allclose(mid.xy, np.asarray(mid.graph_xy)[mid.path])
@@ -120,7 +126,7 @@ def test_tight_passages_keep_most_of_the_oracles_best_clearance(seed: int) -> No
     start = cor.to_xy(np.array([1.0]), np.array([rng.uniform(lo[0] + 1.2, hi[0] - 1.2)]))[0]
     heading = float(cor.heading_at(1.0))
     try:
-        tr = plan_corridor(cor, obs, start, heading, roadmap_params=RoadmapParams(),
+        tr = plan_corridor(cor, obs, start, heading, roadmap_params=PLACED,
                            params=TP, start_speed=10.0, end_speed=None).trajectory
     except RoadBlockedError:
         return
