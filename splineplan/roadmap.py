@@ -64,11 +64,13 @@ class RoadmapParams:
         Length [m] of the road segments a long route is cut into.
     road_margin
         Clearance [m] kept from the road edges, beyond the ego's half width: the road
-        edges are grown by ``vehicle_width / 2 + road_margin``. By default none, as level
-        3's ``TrajectoryParams.road_margin``: the paper asks that the vehicle stay on the
-        road, and a passage between an obstacle and the road's edge is one where it may.
-        Where the obstacles leave room, the chosen vertices keep ``safety_margin`` from the
-        road edges all the same (see :func:`place_vertices`).
+        edges are grown by ``vehicle_width / 2 + road_margin``. By default the safety
+        margin, so that the paper's midpoints keep it from the road edges as from the
+        obstacles (with none, 19 of 177 drivable Monaco junction turns that were feasible
+        came out infeasible). With ``place=True``, 0 lets a passage between an obstacle and
+        the road's edge be open where the car fits: the placed vertices keep
+        ``safety_margin`` from the road edges where the obstacles leave room (see
+        :func:`place_vertices`).
     lane_width
         Width [m] of a lane (SUMO's default 3.2 m): a road ``w`` wide holds
         ``round(w / lane_width)`` lanes (at least one), whose centres the chosen vertices
@@ -89,7 +91,7 @@ class RoadmapParams:
     vehicle_length: float = 4.5
     vehicle_width: float = 1.8
     segment_length: float = 300.0
-    road_margin: float = 0.0
+    road_margin: float = 0.3
     lane_width: float = 3.2
     place: bool = False
 
