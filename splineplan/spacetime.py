@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -197,7 +197,6 @@ class Occupancy:
     t: FloatArray
     lo: FloatArray
     hi: FloatArray
-    obstacles: tuple[MovingObstacle, ...] = field(default=())
 
 
 def occupancy(s: ArrayLike, xy: ArrayLike, heading: ArrayLike, times: ArrayLike,
@@ -218,7 +217,7 @@ def occupancy(s: ArrayLike, xy: ArrayLike, heading: ArrayLike, times: ArrayLike,
     lo = np.full((k, m), np.nan)
     hi = np.full((k, m), np.nan)
     if k == 0 or m == 0 or n == 0:
-        return Occupancy(tt, lo, hi, tuple(moving))
+        return Occupancy(tt, lo, hi)
     tree = cKDTree(pts)
     spacing = float(np.max(np.diff(st))) if n > 1 else 0.0
     ego_r = math.hypot(length, width) / 2.0
@@ -256,7 +255,7 @@ def occupancy(s: ArrayLike, xy: ArrayLike, heading: ArrayLike, times: ArrayLike,
             blocked_w[-1] = blocked[-1] | blocked[-2]
         lo[i, blocked_w] = st[np.clip(lo_w[blocked_w] - 1, 0, n - 1)]
         hi[i, blocked_w] = st[np.clip(hi_w[blocked_w] + 1, 0, n - 1)]
-    return Occupancy(tt, lo, hi, tuple(moving))
+    return Occupancy(tt, lo, hi)
 
 
 def box_gap(c1: FloatArray, h1: FloatArray, size1: tuple[float, float], c2: FloatArray,
@@ -362,13 +361,14 @@ def speed_among(
     for _ in range(len(moving) + 1):
         wall, owner = _walls(occ, yielded, len(times))
         plan = _forward(st, cap, t0, start, dt, wall, a_max, d_max)
-        conflict = _first_conflict(plan, occ, wall, owner, moving)
-        touched = _touched(plan, occ, exclude=yielded)
+        where = _plan_stations(plan[0], plan[1], occ.t)
+        conflict = _first_conflict(where, occ, wall, owner, moving)
+        touched = _touched(where, occ, exclude=yielded)
         if not touched:
             break
         yielded.append(touched[0])
-    passed = [moving[i].id for i in range(len(moving))
-              if i not in yielded and _crossed(plan, occ, i)]
+    ahead = np.any(where[None, :] > occ.hi, axis=1)  # in front of its stations at some time
+    passed = [moving[i].id for i in range(len(moving)) if i not in yielded and ahead[i]]
     return SpeedPlan(*plan, tuple(moving[i].id for i in yielded), tuple(passed), conflict)
 
 
@@ -486,32 +486,19 @@ def _safe_speed(pos: float, walls: FloatArray, floor: FloatArray, j: int, window
     return best
 
 
-def _touched(plan: tuple[FloatArray, FloatArray, FloatArray], occ: Occupancy,
-             exclude: list[int]) -> list[int]:
-    """Obstacles whose blocked stations the plan is on at some time step, earliest first."""
-    t, s, _ = plan
-    where = _plan_stations(t, s, occ.t)
-    first = []
-    for i in range(len(occ.lo)):
-        if i in exclude:
-            continue
-        inside = (where >= occ.lo[i]) & (where <= occ.hi[i])
-        if inside.any():
-            first.append((int(np.argmax(inside)), i))
-    return [i for _, i in sorted(first)]
+def _touched(where: FloatArray, occ: Occupancy, exclude: list[int]) -> list[int]:
+    """Obstacles whose blocked stations the plan (its station ``where`` at each time
+    step) is on at some time step, earliest first."""
+    inside = (where[None, :] >= occ.lo) & (where[None, :] <= occ.hi)
+    hit = [int(i) for i in np.flatnonzero(inside.any(axis=1)) if int(i) not in exclude]
+    return sorted(hit, key=lambda i: int(np.argmax(inside[i])))
 
 
-def _crossed(plan: tuple[FloatArray, FloatArray, FloatArray], occ: Occupancy, i: int) -> bool:
-    """Whether the plan is ahead of obstacle ``i``'s blocked stations at some time."""
-    where = _plan_stations(plan[0], plan[1], occ.t)
-    return bool(np.any(where > occ.hi[i]))
-
-
-def _first_conflict(plan: tuple[FloatArray, FloatArray, FloatArray], occ: Occupancy,
-                    wall: FloatArray, owner: NDArray[np.int64],
-                    moving: Sequence[MovingObstacle]) -> Conflict | None:
-    """The first time step at which the plan reaches a wall it yields to."""
-    where = _plan_stations(plan[0], plan[1], occ.t)
+def _first_conflict(where: FloatArray, occ: Occupancy, wall: FloatArray,
+                    owner: NDArray[np.int64], moving: Sequence[MovingObstacle]
+                    ) -> Conflict | None:
+    """The first time step at which the plan (its station ``where`` at each time step)
+    reaches a wall it yields to."""
     bad = (where > wall + 1e-6) & (owner >= 0)
     if not bad.any():
         return None

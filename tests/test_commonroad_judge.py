@@ -93,10 +93,8 @@ def test_obstacle_fields_are_drivable_by_commonroads_car(seed: int) -> None:
 def test_the_judge_refuses_what_the_steering_rate_forbids() -> None:
     """The same bend planned for a car that could turn its wheels at once: the curve is
     the same, its speed through the bend's ends higher, and CommonRoad's car cannot
-    follow (the judge sees the steering rate). 60 degrees: level 3 uses the lane's play,
-    and a 45 or 50 degree bend then comes out gentle enough for CommonRoad's car even at
-    the higher speed."""
-    corridor, _ = kinked_lane(60.0, 3.5)
+    follow (the judge sees the steering rate)."""
+    corridor, _ = kinked_lane(45.0, 3.5)
     rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), RoadmapParams())
     instant = TrajectoryParams(max_steering_rate=100.0)
     tr = plan_trajectory(rm, corridor, Obstacles.empty(), instant, 0.0, start_speed=8.0)
