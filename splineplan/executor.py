@@ -273,7 +273,7 @@ def on_ray(tasks: list[dict[str, Any]], address: str) -> Rows:
             raise ParameterError(f"cannot reach the Ray cluster at {address}: "
                                  f"{str(err).splitlines()[0] if str(err) else err}") from err
     remote = ray.remote(num_cpus=1, max_retries=0)(execute_task)
-    refs: list[Any] = []
+    pending: list[Any] = []
     try:
         refs = [remote.remote(t) for t in tasks]
         index = {ref: i for i, ref in enumerate(refs)}
@@ -290,7 +290,10 @@ def on_ray(tasks: list[dict[str, Any]], address: str) -> Rows:
             yield i, row
     finally:
         with sigint_ignored():
-            for ref in refs:  # stopped early (Ctrl-C): no more runs on the cluster
+            # stopped early (Ctrl-C): no more runs on the cluster. Only the tasks not yet
+            # taken in: cancelling one whose result has arrived races with Ray's own
+            # bookkeeping of it, and Ray then aborts this process
+            for ref in pending:
                 with contextlib.suppress(Exception):
                     ray.cancel(ref)
             if own:

@@ -114,20 +114,20 @@ def _expected_lines(csv_path: Path) -> list[str]:
     return lines
 
 
-def _check_outputs(res: bench.BenchResult) -> None:
-    out = Path(res.files[0]).parent
+def _check_outputs(out: Path, rows: list[dict[str, typing.Any]],
+                   cases: list[bench.BenchCase]) -> None:
     table = (out / "summary.md").read_text()
     for line in _expected_lines(out / "runs.csv"):
         assert line in table
-    assert [r["case"] for r in res.rows] == [c.name for c in res.cases for _ in DRIVERS]
-    assert [r["driver"] for r in res.rows] == list(DRIVERS) * len(res.cases)
+    assert [r["case"] for r in rows] == [c.name for c in cases for _ in DRIVERS]
+    assert [r["driver"] for r in rows] == list(DRIVERS) * len(cases)
     for name in ("bench_success.png", "bench_clearance.png", "bench_travel_time.png"):
         assert (out / name).stat().st_size > 10_000
 
 
 def test_local_pool_runs_the_suite_and_the_table_holds_its_numbers(
         local: bench.BenchResult) -> None:
-    _check_outputs(local)
+    _check_outputs(Path(local.files[0]).parent, local.rows, local.cases)
     sparse = [r for r in local.rows if r["tier"] == "sparse"]
     assert all(r["arrived"] and r["travel_time"] > 0 for r in sparse)
     assert all(r["wall_time"] > 0 for r in local.rows if not r["error"])
@@ -227,15 +227,33 @@ def _free_port() -> int:
         return int(sock.getsockname()[1])
 
 
+#: The suite on the cluster, in a process of its own: Ray aborts its driver process on an
+#: internal fault, which must fail this test and not end the whole test run unreported.
+_ON_RAY = """
+import json, sys
+from pathlib import Path
+sys.path.insert(0, sys.argv[1])
+from test_bench import DRIVERS, _cases
+from splineplan import bench
+res = bench.run_suite(_cases(Path(sys.argv[2])), out_dir=Path(sys.argv[3]), drivers=DRIVERS,
+                      address=sys.argv[4], progress=False)
+print(json.dumps({"executor": res.executor, "cases": [c.name for c in res.cases]}))
+"""
+
+
 def test_ray_cluster_gives_the_same_rows(
         local: bench.BenchResult, suite_dir: Path, tmp_path: Path, ray_head: str) -> None:
-    res = bench.run_suite(_cases(suite_dir), out_dir=tmp_path, drivers=DRIVERS,
-                          address=ray_head, progress=False)
-    assert res.executor == f"ray ({ray_head})"
-    _check_outputs(res)
-    assert bench.comparable(res.rows) == bench.comparable(local.rows)
-    assert bench.comparable(bench.read_runs_csv(tmp_path / "runs.csv")) == bench.comparable(
-        bench.read_runs_csv(Path(local.files[0])))
+    proc = subprocess.run(
+        [sys.executable, "-c", _ON_RAY, str(Path(__file__).parent), str(suite_dir),
+         str(tmp_path), ray_head], capture_output=True, text=True, timeout=600,
+        stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    told = json.loads(proc.stdout.splitlines()[-1])
+    assert told["executor"] == f"ray ({ray_head})"
+    assert told["cases"] == [c.name for c in local.cases]
+    rows = bench.read_runs_csv(tmp_path / "runs.csv")
+    _check_outputs(tmp_path, rows, local.cases)
+    assert bench.comparable(rows) == bench.comparable(bench.read_runs_csv(Path(local.files[0])))
 
 
 def test_an_unreachable_ray_cluster_is_one_clear_error(tmp_path: Path) -> None:
