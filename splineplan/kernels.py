@@ -439,3 +439,208 @@ def independent_moves(bad: FloatArray, k: int, budget: int
         chosen[count] = i
         count += 1
     return chosen[:count]
+
+
+#: Room [m] beyond the margins that a smoothing move leaves the footprint where it had it:
+#: the check runs on the optimiser's samples, and the curve between them comes a few
+#: millimetres closer on a bend.
+SMOOTH_ROOM = 0.02
+
+
+@njit(cache=True)
+def steering_angle(kappa: float, wheelbase: float) -> float:  # pragma: no cover - compiled
+    """:func:`splineplan.speed.steering_angle` of one sample."""
+    half = 0.5 * wheelbase * kappa
+    return float(np.arctan(wheelbase * kappa / np.sqrt(max(1.0 - half * half, 1e-12))))
+
+
+@njit(cache=True)
+def allowed_speeds(pos: FloatArray, d1: FloatArray, d2: FloatArray, a: int, b: int,
+                   wheelbase: float, rate: float, mu_g: float, s_max: float
+                   ) -> tuple[FloatArray, FloatArray]:  # pragma: no cover - compiled
+    """Speed limits [m/s] of samples ``a .. b - 1``: the cornering speed of equation (1)
+    (``s_max`` at most) and the steering rate's, which a step between two samples whose
+    wheel angles differ by ``d`` gives both its ends: ``rate * chord / |d|``, as
+    :func:`splineplan.speed.steering_speed_limit` does."""
+    q = b - a
+    corner, steer = np.empty(q), np.full(q, np.inf)
+    prev = 0.0
+    for t in range(q):
+        j = a + t
+        kap = curvature(d1[j, 0], d1[j, 1], d2[j, 0], d2[j, 1])
+        corner[t] = min(s_max, np.sqrt(mu_g / abs(kap))) if kap != 0.0 else s_max
+        delta = steering_angle(kap, wheelbase)
+        if t > 0:
+            turn = abs(delta - prev)
+            if turn > 0.0:
+                lim = rate * np.hypot(pos[j, 0] - pos[j - 1, 0], pos[j, 1] - pos[j - 1, 1]) / turn
+                steer[t - 1] = min(steer[t - 1], lim)
+                steer[t] = min(steer[t], lim)
+        prev = delta
+    return corner, steer
+
+
+@njit(cache=True)
+def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
+                    kappa: FloatArray, slack: FloatArray, station: FloatArray,
+                    first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
+                    hi: NDArray[np.int64], cand: NDArray[np.int64],
+                    movable: NDArray[np.bool_], k: int, wheelbase: float, rate: float,
+                    mu_g: float, s_max: float, kappa_max: float, max_moves: int,
+                    checker: tuple[Any, ...]
+                    ) -> tuple[int, int]:  # pragma: no cover - compiled
+    """Smooth the curve where the steering rate, not the curvature, sets its speed: rounds
+    of moves of the control points that shape such samples (the worst first, then others
+    of independent stretches) towards where the polygon's higher differences vanish
+    (:func:`_smooth_targets`), which spreads a change of curvature over more of the curve
+    without undoing the turn (:func:`_smooth_move`: a move is kept if the lowest speed limit
+    of its stretch rises and neither its curvature beyond the limit nor its footprint's
+    clearance gets worse, nor comes within :data:`SMOOTH_ROOM` of the margins where it was
+    not). Returns the moves tried and accepted."""
+    n, m = len(ctrl), len(kappa)
+    tried = accepted = 0
+    refused = np.zeros(n, dtype=np.bool_)
+    bad = np.zeros(n)
+    while tried < max_moves:
+        corner, steer = allowed_speeds(pos, d1, d2, 0, m, wheelbase, rate, mu_g, s_max)
+        for i in range(n):
+            bad[i] = 0.0
+        for j in range(m):
+            if steer[j] < corner[j] * (1.0 - 1e-6):
+                short = 1.0 - steer[j] / corner[j]
+                for c in cand[j]:
+                    if movable[c] and not refused[c] and 1 <= c <= n - 2:
+                        bad[c] = max(bad[c], short)
+                        break
+        if not (bad > 0).any():
+            break
+        chosen = independent_moves(bad, k, max_moves - tried)
+        if len(chosen) == 0:
+            break
+        tried += len(chosen)
+        for i in chosen:
+            if _smooth_move(i, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
+                            hi, wheelbase, rate, mu_g, s_max, kappa_max, checker):
+                accepted += 1
+                for c in range(max(i - k, 0), min(i + k + 1, n)):
+                    refused[c] = False
+            else:
+                refused[i] = True
+    return tried, accepted
+
+
+@njit(cache=True)
+def _smooth_targets(ctrl: FloatArray, i: int) -> FloatArray:  # pragma: no cover - compiled
+    """Where :func:`smooth_steering` may move control point ``i`` ``(3, 2)``: where the
+    polygon's sixth difference vanishes (least change of its third differences, which set
+    the curvature's rate), where its fourth vanishes, and its neighbours' mean (equation
+    (3)); a point too near an end takes the mean."""
+    n = len(ctrl)
+    out = np.empty((3, 2))
+    for d in range(2):
+        mean = 0.5 * (ctrl[i - 1, d] + ctrl[i + 1, d])
+        out[0, d] = out[1, d] = out[2, d] = mean
+        if 2 <= i <= n - 3:
+            out[1, d] = (-ctrl[i - 2, d] + 4.0 * (ctrl[i - 1, d] + ctrl[i + 1, d])
+                         - ctrl[i + 2, d]) / 6.0
+            out[0, d] = out[1, d]
+        if 3 <= i <= n - 4:
+            out[0, d] = (15.0 * (ctrl[i - 1, d] + ctrl[i + 1, d])
+                         - 6.0 * (ctrl[i - 2, d] + ctrl[i + 2, d])
+                         + ctrl[i - 3, d] + ctrl[i + 3, d]) / 20.0
+    return out
+
+
+@njit(cache=True)
+def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
+                 d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
+                 first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
+                 hi: NDArray[np.int64], wheelbase: float, rate: float, mu_g: float,
+                 s_max: float, kappa_max: float, checker: tuple[Any, ...]
+                 ) -> bool:  # pragma: no cover - compiled
+    """One move of :func:`smooth_steering`: towards each of :func:`_smooth_targets`, the
+    whole way, half and a quarter of it; of those that raise the lowest speed limit of the
+    stretch and keep its curvature, the best whose footprint stays clear is applied in
+    place. Returns whether one was."""
+    m = len(kappa)
+    targets = _smooth_targets(ctrl, i)
+    a, b = lo[i], hi[i]
+    q = b - a
+    # the stretch with one unchanged sample each side: the steps into it count too
+    a0, b0 = max(a - 1, 0), min(b + 1, m)
+    c0, s0 = allowed_speeds(pos, d1, d2, a0, b0, wheelbase, rate, mu_g, s_max)
+    old_v = np.inf
+    for t in range(b0 - a0):
+        old_v = min(old_v, c0[t], s0[t])
+    old_k = kappa_max
+    for t in range(q):
+        old_k = max(old_k, kappa[a + t])
+    fracs = (1.0, 0.5, 0.25)
+    gain = np.full(9, -np.inf)
+    moves = np.zeros((9, 2))
+    npos, ne1, ne2 = pos[a0:b0].copy(), d1[a0:b0].copy(), d2[a0:b0].copy()
+    for c in range(9):
+        dx = fracs[c % 3] * (targets[c // 3, 0] - ctrl[i, 0])
+        dy = fracs[c % 3] * (targets[c // 3, 1] - ctrl[i, 1])
+        if np.hypot(dx, dy) < 1e-6:
+            continue
+        moves[c, 0], moves[c, 1] = dx, dy
+        new_k = kappa_max
+        for t in range(q):
+            j = a + t
+            r = i - first[j]
+            u = j - a0
+            npos[u, 0] = pos[j, 0] + basis[0, r, j] * dx
+            npos[u, 1] = pos[j, 1] + basis[0, r, j] * dy
+            ne1[u, 0] = d1[j, 0] + basis[1, r, j] * dx
+            ne1[u, 1] = d1[j, 1] + basis[1, r, j] * dy
+            ne2[u, 0] = d2[j, 0] + basis[2, r, j] * dx
+            ne2[u, 1] = d2[j, 1] + basis[2, r, j] * dy
+            new_k = max(new_k, abs(curvature(ne1[u, 0], ne1[u, 1], ne2[u, 0], ne2[u, 1])))
+        if new_k > old_k + 1e-12:
+            continue
+        c1, s1 = allowed_speeds(npos, ne1, ne2, 0, b0 - a0, wheelbase, rate, mu_g, s_max)
+        new_v = np.inf
+        for t in range(b0 - a0):
+            new_v = min(new_v, c1[t], s1[t])
+        if new_v > old_v * (1.0 + 1e-6):
+            gain[c] = new_v
+    for _ in range(3):  # the best three by speed, until one keeps the footprint clear
+        c = int(np.argmax(gain))
+        if gain[c] == -np.inf:
+            return False
+        gain[c] = -np.inf
+        dx, dy = moves[c, 0], moves[c, 1]
+        px, py, kap, head = np.empty(q), np.empty(q), np.empty(q), np.empty(q)
+        e1, e2 = np.empty((q, 2)), np.empty((q, 2))
+        for t in range(q):
+            j = a + t
+            r = i - first[j]
+            px[t] = pos[j, 0] + basis[0, r, j] * dx
+            py[t] = pos[j, 1] + basis[0, r, j] * dy
+            e1[t, 0] = d1[j, 0] + basis[1, r, j] * dx
+            e1[t, 1] = d1[j, 1] + basis[1, r, j] * dy
+            e2[t, 0] = d2[j, 0] + basis[2, r, j] * dx
+            e2[t, 1] = d2[j, 1] + basis[2, r, j] * dy
+            kap[t] = abs(curvature(e1[t, 0], e1[t, 1], e2[t, 0], e2[t, 1]))
+            head[t] = np.arctan2(e1[t, 1], e1[t, 0])
+        sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
+        clear = True
+        new_s = old_s = 0.0
+        for t in range(q):
+            j = a + t
+            if slack[j] >= 0 and sl[t] < min(slack[j], SMOOTH_ROOM):
+                clear = False
+            new_s, old_s = max(new_s, -sl[t]), max(old_s, -slack[j])
+        if not clear or new_s > old_s + 1e-12:
+            continue
+        for t in range(q):
+            j = a + t
+            pos[j, 0], pos[j, 1] = px[t], py[t]
+            d1[j, 0], d1[j, 1] = e1[t, 0], e1[t, 1]
+            d2[j, 0], d2[j, 1] = e2[t, 0], e2[t, 1]
+            kappa[j], slack[j], station[j] = kap[t], sl[t], sc[t]
+        ctrl[i, 0] += dx
+        ctrl[i, 1] += dy
+        return True
+    return False

@@ -441,3 +441,21 @@ class _Optimiser:
         tried, accepted, refused, rounds = (int(v) for v in out)
         log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)
         return tried, accepted, refused, rounds
+
+    def smooth_steering(self) -> tuple[int, int]:
+        """Where the steering rate rather than the curvature sets the speed (the start and
+        end of a turn), spread the change of curvature by moving control points while the
+        footprint stays clear (:func:`splineplan.kernels.smooth_steering`): the car then
+        keeps its speed there instead of slowing to turn the wheel. Returns the moves tried
+        and accepted."""
+        p = self.params
+        if not np.isfinite(p.max_steering_rate):
+            return 0, 0
+        tried, accepted = kernels.smooth_steering(
+            self.ctrl, self.pos, self.d1, self.d2, self.kappa, self.slack, self.station,
+            kernel_ints(self.first), kernel_floats(self.basis),
+            self.lo.astype(np.int64), self.hi.astype(np.int64), kernel_ints(self.cand),
+            self.movable, self.k, p.wheelbase, p.max_steering_rate, p.mu * p.g, p.s_max,
+            p.kappa_max, p.max_iterations, self.checker.slack_args())
+        log.debug("steering smoothing: %d tried, %d accepted", tried, accepted)
+        return int(tried), int(accepted)

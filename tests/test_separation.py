@@ -14,6 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon
+from test_trajectory import assert_wheels_keep_up
 
 from benchmarks.bench_oracle import extended_road, goal_region, random_field
 from benchmarks.kinematic_oracle import Search, best_clearance, error
@@ -64,7 +65,9 @@ def test_one_car_in_the_lane_is_passed_in_the_next_lanes_centre(width: float,
     """A car parked at the centre of the vehicle's lane on a free road: the trajectory
     passes it at least as far as keeping the next lane's centre does (lane width less
     the car's width, 1.4 m), at full speed, and keeps the centre of a lane on either
-    side of it."""
+    side of it. The lane change is smooth enough for the steering rate at that speed:
+    the car never drops below its start speed (10 m/s) to turn the wheels, and they turn
+    no faster than the car can turn them."""
     cor = straight(width)
     obs = Obstacles.from_boxes([[60.0, lane]], [0.0], 4.5, CAR_W)
     plan = plan_corridor(cor, obs, [1.0, lane], 0.0, params=TP, roadmap_params=PLACED,
@@ -74,6 +77,8 @@ def test_one_car_in_the_lane_is_passed_in_the_next_lanes_centre(width: float,
     assert tr.feasible
     assert float(np.min(tr.clearance_obstacles)) >= 3.2 - CAR_W - 0.01
     assert tr.min_speed_after == pytest.approx(TP.s_max)
+    assert tr.speed.min() >= 10.0 - 1e-6
+    assert_wheels_keep_up(tr, TP)
     lat = cor.to_sl(tr.xy)[:, 1]
     lanes = -width / 2 + 1.6 + 3.2 * np.arange(round(width / 3.2))
     for s_ in (20.0, 110.0):  # well before and after it
