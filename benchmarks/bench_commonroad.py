@@ -68,7 +68,8 @@ def _splineplan(path: Path) -> dict[str, Any]:
 
     problem = cr.read(path)
     row: dict[str, Any] = {"scenario": path.stem, "static": len(problem.scenario.static_obstacles),
-                           "dynamic": len(problem.scenario.dynamic_obstacles)}
+                           "dynamic": len(problem.scenario.dynamic_obstacles),
+                           "has_goal": bool(problem.planning_problem.goal.state_list)}
     t0 = time.perf_counter()
     c0 = time.process_time()
     try:
@@ -103,7 +104,7 @@ def _reactive(path: Path, budget: float) -> dict[str, Any]:
 
     scenario, pps = CommonRoadFileReader(str(path)).open()
     pp = pps.planning_problem_dict[sorted(pps.planning_problem_dict)[0]]
-    row: dict[str, Any] = {"scenario": path.stem}
+    row: dict[str, Any] = {"scenario": path.stem, "has_goal": bool(pp.goal.state_list)}
     cycles: list[float] = []
     t_start = time.perf_counter()
     try:
@@ -167,6 +168,11 @@ def _summary(name: str, rows: list[dict[str, Any]], time_key: str) -> str:
     n = len(rows)
     passed = sum(bool(r.get("passed")) for r in rows)
     parts = [f"{name}: all checks {passed}/{n} ({100.0 * passed / max(n, 1):.0f} %)"]
+    goals = [r for r in rows if r.get("has_goal", True)]
+    if len(goals) < n:  # a planning problem without a goal state: no solution reaches it
+        ok = sum(bool(r.get("passed")) for r in goals)
+        parts.append(f"{ok}/{len(goals)} ({100.0 * ok / max(len(goals), 1):.0f} %) of those "
+                     f"with a goal state ({n - len(goals)} without)")
     for k in CHECKS:
         parts.append(f"{k} {sum(bool(r.get(k)) for r in rows)}")
     times = [r[time_key] for r in rows if r.get(time_key) == r.get(time_key)

@@ -445,6 +445,13 @@ def independent_moves(bad: FloatArray, k: int, budget: int
 #: the check runs on the optimiser's samples, and the curve between them comes a few
 #: millimetres closer on a bend.
 SMOOTH_ROOM = 0.02
+#: Share of the speed below which the steering rate must hold the car for
+#: :func:`smooth_steering` to smooth there.
+SMOOTH_GAIN = 0.05
+#: The moves :func:`_smooth_move` tries, in order: (target of :func:`_smooth_targets`,
+#: share of the way there).
+SMOOTH_STEPS = ((0.0, 1.0), (0.0, 0.5), (2.0, 0.5), (0.0, 0.25), (2.0, 0.25), (1.0, 0.5),
+                (2.0, 1.0))
 
 
 @njit(cache=True)
@@ -486,7 +493,8 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
                     first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
                     hi: NDArray[np.int64], cand: NDArray[np.int64],
                     movable: NDArray[np.bool_], k: int, wheelbase: float, rate: float,
-                    mu_g: float, s_max: float, kappa_max: float, max_moves: int,
+                    mu_g: float, s_max: float, kappa_cap: float, a_max: float,
+                    b_max: float, start_speed: float, max_moves: int,
                     checker: tuple[Any, ...]
                     ) -> tuple[int, int]:  # pragma: no cover - compiled
     """Smooth the curve where the steering rate, not the curvature, sets its speed: rounds
@@ -496,18 +504,32 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
     without undoing the turn (:func:`_smooth_move`: a move is kept if the lowest speed limit
     of its stretch rises and neither its curvature beyond the limit nor its footprint's
     clearance gets worse, nor comes within :data:`SMOOTH_ROOM` of the margins where it was
-    not). Returns the moves tried and accepted."""
+    not). ``kappa_cap`` [1/m]: the curvature that no move may raise a sample beyond unless
+    it was there already (the worst bend's, at most the turning limit's, at least the one
+    that still allows ``s_max``: smoothing never sharpens the worst bend). Returns the
+    moves tried and accepted."""
     n, m = len(ctrl), len(kappa)
     tried = accepted = 0
     refused = np.zeros(n, dtype=np.bool_)
     bad = np.zeros(n)
+    v = np.empty(m)
+    corner, steer = allowed_speeds(pos, d1, d2, 0, m, wheelbase, rate, mu_g, s_max)
     while tried < max_moves:
-        corner, steer = allowed_speeds(pos, d1, d2, 0, m, wheelbase, rate, mu_g, s_max)
+        # the speed the car would drive without the steering's limit (accelerating from the
+        # start, braking for the curves ahead): only where the steering holds it below that
+        # is the curve worth smoothing
+        v[0] = min(start_speed, corner[0])
+        for j in range(1, m):
+            ds = np.hypot(pos[j, 0] - pos[j - 1, 0], pos[j, 1] - pos[j - 1, 1])
+            v[j] = min(corner[j], np.sqrt(v[j - 1] ** 2 + 2.0 * a_max * ds))
+        for j in range(m - 2, -1, -1):
+            ds = np.hypot(pos[j + 1, 0] - pos[j, 0], pos[j + 1, 1] - pos[j, 1])
+            v[j] = min(v[j], np.sqrt(v[j + 1] ** 2 + 2.0 * b_max * ds))
         for i in range(n):
             bad[i] = 0.0
         for j in range(m):
-            if steer[j] < corner[j] * (1.0 - 1e-6):
-                short = 1.0 - steer[j] / corner[j]
+            if steer[j] < v[j] * (1.0 - SMOOTH_GAIN):
+                short = 1.0 - steer[j] / v[j]
                 for c in cand[j]:
                     if movable[c] and not refused[c] and 1 <= c <= n - 2:
                         bad[c] = max(bad[c], short)
@@ -520,8 +542,13 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
         tried += len(chosen)
         for i in chosen:
             if _smooth_move(i, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
-                            hi, wheelbase, rate, mu_g, s_max, kappa_max, checker):
+                            hi, wheelbase, rate, mu_g, s_max, kappa_cap, checker):
                 accepted += 1
+                # the limits of the changed samples, with a step each side
+                a0, b0 = max(lo[i] - 2, 0), min(hi[i] + 2, m)
+                c, st = allowed_speeds(pos, d1, d2, a0, b0, wheelbase, rate, mu_g, s_max)
+                for t in range(1 if a0 > 0 else 0, b0 - a0 - (1 if b0 < m else 0)):
+                    corner[a0 + t], steer[a0 + t] = c[t], st[t]
                 for c in range(max(i - k, 0), min(i + k + 1, n)):
                     refused[c] = False
             else:
@@ -556,12 +583,12 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
                  d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
                  first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
                  hi: NDArray[np.int64], wheelbase: float, rate: float, mu_g: float,
-                 s_max: float, kappa_max: float, checker: tuple[Any, ...]
+                 s_max: float, kappa_cap: float, checker: tuple[Any, ...]
                  ) -> bool:  # pragma: no cover - compiled
-    """One move of :func:`smooth_steering`: towards each of :func:`_smooth_targets`, the
-    whole way, half and a quarter of it; of those that raise the lowest speed limit of the
-    stretch and keep its curvature, the best whose footprint stays clear is applied in
-    place. Returns whether one was."""
+    """One move of :func:`smooth_steering`: towards one of :func:`_smooth_targets`, the
+    whole way or part of it (in the order of :data:`SMOOTH_STEPS`), the first that raises
+    the lowest speed limit of the stretch, keeps its curvature and keeps its footprint
+    clear is applied in place. Returns whether one was."""
     m = len(kappa)
     targets = _smooth_targets(ctrl, i)
     a, b = lo[i], hi[i]
@@ -572,20 +599,19 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
     old_v = np.inf
     for t in range(b0 - a0):
         old_v = min(old_v, c0[t], s0[t])
-    old_k = kappa_max
+    old_k = kappa_cap
     for t in range(q):
         old_k = max(old_k, kappa[a + t])
-    fracs = (1.0, 0.5, 0.25)
-    gain = np.full(9, -np.inf)
-    moves = np.zeros((9, 2))
     npos, ne1, ne2 = pos[a0:b0].copy(), d1[a0:b0].copy(), d2[a0:b0].copy()
-    for c in range(9):
-        dx = fracs[c % 3] * (targets[c // 3, 0] - ctrl[i, 0])
-        dy = fracs[c % 3] * (targets[c // 3, 1] - ctrl[i, 1])
+    kap, head = np.empty(q), np.empty(q)
+    px, py = np.empty(q), np.empty(q)
+    for step in SMOOTH_STEPS:
+        target, frac = int(step[0]), step[1]
+        dx = frac * (targets[target, 0] - ctrl[i, 0])
+        dy = frac * (targets[target, 1] - ctrl[i, 1])
         if np.hypot(dx, dy) < 1e-6:
             continue
-        moves[c, 0], moves[c, 1] = dx, dy
-        new_k = kappa_max
+        new_k = kappa_cap
         for t in range(q):
             j = a + t
             r = i - first[j]
@@ -596,34 +622,20 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
             ne1[u, 1] = d1[j, 1] + basis[1, r, j] * dy
             ne2[u, 0] = d2[j, 0] + basis[2, r, j] * dx
             ne2[u, 1] = d2[j, 1] + basis[2, r, j] * dy
-            new_k = max(new_k, abs(curvature(ne1[u, 0], ne1[u, 1], ne2[u, 0], ne2[u, 1])))
+            kap[t] = abs(curvature(ne1[u, 0], ne1[u, 1], ne2[u, 0], ne2[u, 1]))
+            new_k = max(new_k, kap[t])
         if new_k > old_k + 1e-12:
             continue
         c1, s1 = allowed_speeds(npos, ne1, ne2, 0, b0 - a0, wheelbase, rate, mu_g, s_max)
         new_v = np.inf
         for t in range(b0 - a0):
             new_v = min(new_v, c1[t], s1[t])
-        if new_v > old_v * (1.0 + 1e-6):
-            gain[c] = new_v
-    for _ in range(3):  # the best three by speed, until one keeps the footprint clear
-        c = int(np.argmax(gain))
-        if gain[c] == -np.inf:
-            return False
-        gain[c] = -np.inf
-        dx, dy = moves[c, 0], moves[c, 1]
-        px, py, kap, head = np.empty(q), np.empty(q), np.empty(q), np.empty(q)
-        e1, e2 = np.empty((q, 2)), np.empty((q, 2))
+        if not new_v > old_v * (1.0 + 1e-6):
+            continue
         for t in range(q):
-            j = a + t
-            r = i - first[j]
-            px[t] = pos[j, 0] + basis[0, r, j] * dx
-            py[t] = pos[j, 1] + basis[0, r, j] * dy
-            e1[t, 0] = d1[j, 0] + basis[1, r, j] * dx
-            e1[t, 1] = d1[j, 1] + basis[1, r, j] * dy
-            e2[t, 0] = d2[j, 0] + basis[2, r, j] * dx
-            e2[t, 1] = d2[j, 1] + basis[2, r, j] * dy
-            kap[t] = abs(curvature(e1[t, 0], e1[t, 1], e2[t, 0], e2[t, 1]))
-            head[t] = np.arctan2(e1[t, 1], e1[t, 0])
+            u = a + t - a0
+            px[t], py[t] = npos[u, 0], npos[u, 1]
+            head[t] = np.arctan2(ne1[u, 1], ne1[u, 0])
         sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
         clear = True
         new_s = old_s = 0.0
@@ -636,9 +648,10 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
             continue
         for t in range(q):
             j = a + t
-            pos[j, 0], pos[j, 1] = px[t], py[t]
-            d1[j, 0], d1[j, 1] = e1[t, 0], e1[t, 1]
-            d2[j, 0], d2[j, 1] = e2[t, 0], e2[t, 1]
+            u = j - a0
+            pos[j, 0], pos[j, 1] = npos[u, 0], npos[u, 1]
+            d1[j, 0], d1[j, 1] = ne1[u, 0], ne1[u, 1]
+            d2[j, 0], d2[j, 1] = ne2[u, 0], ne2[u, 1]
             kappa[j], slack[j], station[j] = kap[t], sl[t], sc[t]
         ctrl[i, 0] += dx
         ctrl[i, 1] += dy

@@ -26,6 +26,9 @@ from splineplan.trajectory_params import TrajectoryParams
 
 log = logging.getLogger(__name__)
 
+#: Moves per control point that the steering's smoothing may try (a bound on its time).
+SMOOTH_MOVES = 2
+
 #: Room [m] beyond the safety margin that a sideways push of the curve aims for (see
 #: :func:`_push`).
 PUSH_EXTRA = 0.03
@@ -442,12 +445,13 @@ class _Optimiser:
         log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)
         return tried, accepted, refused, rounds
 
-    def smooth_steering(self) -> tuple[int, int]:
+    def smooth_steering(self, start_speed: float) -> tuple[int, int]:
         """Where the steering rate rather than the curvature sets the speed (the start and
-        end of a turn), spread the change of curvature by moving control points while the
-        footprint stays clear (:func:`splineplan.kernels.smooth_steering`): the car then
-        keeps its speed there instead of slowing to turn the wheel. Returns the moves tried
-        and accepted."""
+        end of a turn, a lane change at speed), spread the change of curvature by moving
+        control points while the footprint stays clear
+        (:func:`splineplan.kernels.smooth_steering`): the car then keeps its speed there
+        instead of slowing to turn the wheel. ``start_speed`` [m/s]: where the speed
+        profile starts. Returns the moves tried and accepted."""
         p = self.params
         if not np.isfinite(p.max_steering_rate):
             return 0, 0
@@ -456,6 +460,9 @@ class _Optimiser:
             kernel_ints(self.first), kernel_floats(self.basis),
             self.lo.astype(np.int64), self.hi.astype(np.int64), kernel_ints(self.cand),
             self.movable, self.k, p.wheelbase, p.max_steering_rate, p.mu * p.g, p.s_max,
-            p.kappa_max, p.max_iterations, self.checker.slack_args())
+            min(max(float(self.kappa.max(initial=0.0)), p.kappa_smax), p.kappa_max),
+            p.a_max, p.b_max,
+            float(start_speed), min(p.max_iterations, SMOOTH_MOVES * len(self.ctrl)),
+            self.checker.slack_args())
         log.debug("steering smoothing: %d tried, %d accepted", tried, accepted)
         return int(tried), int(accepted)

@@ -58,7 +58,7 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "_smooth_move": ((i8, F2, F2, F2, F2, F1, F1, F1, I1, F3, I1, I1, f8, f8, f8, f8, f8,
                           nt.Tuple(_CHECKER)),),
         "smooth_steering": ((F2, F2, F2, F2, F1, F1, F1, I1, F3, I1, I1, I2, B1, i8, f8, f8,
-                             f8, f8, f8, i8, nt.Tuple(_CHECKER)),),
+                             f8, f8, f8, f8, f8, f8, i8, nt.Tuple(_CHECKER)),),
     }),
     "splineplan.spacetime": (1.5, {
         "_drive": ((F1, F1, F1, F1, f8, f8, f8, f8),),

@@ -438,7 +438,7 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     opt = _Optimiser(curve, checker, params, samples)
     kappa_before = opt.kappa.copy()
     tried, accepted, refused, rounds = opt.run()
-    opt.smooth_steering()
+    opt.smooth_steering(start_speed)
     stats = IterationStats(tried, accepted, refused, rounds, refinements, len(curve.ctrl),
                            doubled)
     final = opt.ctrl
