@@ -512,19 +512,22 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
     tried = accepted = 0
     refused = np.zeros(n, dtype=np.bool_)
     bad = np.zeros(n)
-    v = np.empty(m)
+    v, ds = np.empty(m), np.zeros(m)  # ds[j]: chord from sample j - 1 to j
+    for j in range(1, m):
+        ds[j] = np.hypot(pos[j, 0] - pos[j - 1, 0], pos[j, 1] - pos[j - 1, 1])
     corner, steer = allowed_speeds(pos, d1, d2, 0, m, wheelbase, rate, mu_g, s_max)
+    changed = True
     while tried < max_moves:
-        # the speed the car would drive without the steering's limit (accelerating from the
-        # start, braking for the curves ahead): only where the steering holds it below that
-        # is the curve worth smoothing
-        v[0] = min(start_speed, corner[0])
-        for j in range(1, m):
-            ds = np.hypot(pos[j, 0] - pos[j - 1, 0], pos[j, 1] - pos[j - 1, 1])
-            v[j] = min(corner[j], np.sqrt(v[j - 1] ** 2 + 2.0 * a_max * ds))
-        for j in range(m - 2, -1, -1):
-            ds = np.hypot(pos[j + 1, 0] - pos[j, 0], pos[j + 1, 1] - pos[j, 1])
-            v[j] = min(v[j], np.sqrt(v[j + 1] ** 2 + 2.0 * b_max * ds))
+        if changed:
+            # the speed the car would drive without the steering's limit (accelerating
+            # from the start, braking for the curves ahead): only where the steering holds
+            # it below that is the curve worth smoothing
+            v[0] = min(start_speed, corner[0])
+            for j in range(1, m):
+                v[j] = min(corner[j], np.sqrt(v[j - 1] ** 2 + 2.0 * a_max * ds[j]))
+            for j in range(m - 2, -1, -1):
+                v[j] = min(v[j], np.sqrt(v[j + 1] ** 2 + 2.0 * b_max * ds[j + 1]))
+            changed = False
         for i in range(n):
             bad[i] = 0.0
         for j in range(m):
@@ -544,13 +547,16 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
             if _smooth_move(i, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
                             hi, wheelbase, rate, mu_g, s_max, kappa_cap, checker):
                 accepted += 1
+                changed = True
                 # the limits of the changed samples, with a step each side
                 a0, b0 = max(lo[i] - 2, 0), min(hi[i] + 2, m)
-                c, st = allowed_speeds(pos, d1, d2, a0, b0, wheelbase, rate, mu_g, s_max)
+                lc, ls = allowed_speeds(pos, d1, d2, a0, b0, wheelbase, rate, mu_g, s_max)
                 for t in range(1 if a0 > 0 else 0, b0 - a0 - (1 if b0 < m else 0)):
-                    corner[a0 + t], steer[a0 + t] = c[t], st[t]
-                for c in range(max(i - k, 0), min(i + k + 1, n)):
-                    refused[c] = False
+                    corner[a0 + t], steer[a0 + t] = lc[t], ls[t]
+                for j in range(max(a0, 1), b0):
+                    ds[j] = np.hypot(pos[j, 0] - pos[j - 1, 0], pos[j, 1] - pos[j - 1, 1])
+                for r in range(max(i - k, 0), min(i + k + 1, n)):
+                    refused[r] = False
             else:
                 refused[i] = True
     return tried, accepted
