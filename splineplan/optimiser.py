@@ -27,7 +27,7 @@ from splineplan.trajectory_params import TrajectoryParams
 log = logging.getLogger(__name__)
 
 #: Moves per control point that the steering's smoothing may try (a bound on its time).
-SMOOTH_MOVES = 1
+SMOOTH_MOVES = 2
 
 #: Room [m] beyond the safety margin that a sideways push of the curve aims for (see
 #: :func:`_push`).
