@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely import affinity
 from shapely.geometry import LineString, Polygon, box
+from test_speed import wheel_angle
 
 from splineplan.corridor import Corridor
 from splineplan.errors import ParameterError, RoadBlockedError, TrajectoryError
@@ -238,8 +239,6 @@ def assert_wheels_keep_up(tr: Trajectory, params: TrajectoryParams = TP) -> None
     single-track car (centre half the wheelbase ahead of the rear axle) no faster than
     the steering rate (the wheel angle from the rear axle's radius, as the speed tests
     write it)."""
-    from test_speed import wheel_angle
-
     angle = wheel_angle(tr.curvature, params.wheelbase)
     dt = np.diff(tr.t)
     ok = np.isfinite(dt) & (dt > 0)
