@@ -248,6 +248,10 @@ KEEP_TURN = 0.3
 TURN_SHARE = 0.8
 #: Power of the excess turn in :func:`min_turning_offsets`' weights.
 TURN_POWER = 2.0
+#: Largest weight of a turn in :func:`min_turning_offsets` (against 1 where the polygon
+#: turns gently): heavier rows would make the system ill-conditioned against the pins
+#: that hold offsets at their bounds.
+TURN_CAP = 1e4
 
 
 def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
@@ -265,7 +269,8 @@ def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     where the polygon's discrete curvature ``turn`` [1/m] (turning angle over the mean of
     the two legs) exceeds ``target = TURN_SHARE * kappa_max`` [1/m]: iteratively
     reweighted least squares towards the polygon of least largest turn (equation (3)'s
-    smoothing, aimed at the turning limit). The offsets stay within ``lo <= l <= hi``.
+    smoothing, aimed at the turning limit), each weight at most :data:`TURN_CAP`. The
+    offsets stay within ``lo <= l <= hi``.
     """
     m = len(origin)
     x = min_bending_offsets(origin, normal, lo, hi, centre, weight)
@@ -278,8 +283,12 @@ def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
         if r > 0:
             if not np.any(turn > target):
                 break
-            rows = rows * np.maximum(turn / target, 1.0) ** TURN_POWER
-        x = min_bending_offsets(origin, normal, lo, hi, centre, weight, legs=legs, rows=rows)
+            rows = np.minimum(rows * np.maximum(turn / target, 1.0) ** TURN_POWER, TURN_CAP)
+        try:
+            x = min_bending_offsets(origin, normal, lo, hi, centre, weight, legs=legs,
+                                    rows=rows)
+        except np.linalg.LinAlgError:  # pragma: no cover - the cap keeps it definite
+            break
     return x
 
 
