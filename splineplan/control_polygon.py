@@ -63,6 +63,7 @@ class VertexFrame:
     s0: float  #: the start's station [m]
     vs: FloatArray  #: (m,) the vertices' stations [m]
     lines: tuple[FloatArray, ...]  #: the vertices' :func:`_vertex_lines`
+    free: FloatArray  #: (m, 2) the vertices' :func:`_free_intervals` [m]
 
 
 def vertex_frame(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams
@@ -100,13 +101,31 @@ def vertex_frame(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams
     moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
     pts = pts.copy()
     pts[moved] = lines[0][moved] + lines[3][moved, None] * lines[2][moved]
-    return VertexFrame(start, pts, s0, vs, lines)
+    return VertexFrame(start, pts, s0, vs, lines, _free_intervals(roadmap, distinct, lines))
+
+
+def _free_intervals(roadmap: Roadmap, distinct: NDArray[np.bool_],
+                    lines: tuple[FloatArray, ...]) -> FloatArray:
+    """Each distinct vertex's free interval ``(m, 2)`` [m] (lateral offsets), within level
+    2's band where it has one (no nearer the obstacles than the vertex); the vertex's band
+    of :func:`_vertex_lines` where the roadmap has no graph."""
+    band = np.column_stack((lines[3] - lines[4], lines[3] + lines[4]))
+    path = np.asarray(roadmap.path)
+    if not (len(path) == len(distinct) and len(roadmap.graph_lo) and len(roadmap.graph_hi)):
+        return band
+    lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
+    hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
+    if len(roadmap.band_lo) == len(path):
+        lo = np.maximum(lo, np.asarray(roadmap.band_lo, dtype=float)[distinct])
+        hi = np.minimum(hi, np.asarray(roadmap.band_hi, dtype=float)[distinct])
+    # never narrower than the band (the band reserve may move a vertex off its interval)
+    return np.column_stack((np.minimum(lo, band[:, 0]), np.maximum(hi, band[:, 1])))
 
 
 def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float | None,
                     params: TrajectoryParams, start_speed: float, smooth: bool = False,
-                    frame: VertexFrame | None = None, keep_turns: bool = False
-                    ) -> tuple[FloatArray, NDArray[np.int64]]:
+                    frame: VertexFrame | None = None, keep_turns: bool = False,
+                    free: bool = False) -> tuple[FloatArray, NDArray[np.int64]]:
     """Candidate control points ``(c, 2)`` and how often the first curve uses each (0 or 1).
 
     The candidates are the vehicle's position, a heading point ahead of it and the roadmap
@@ -123,6 +142,8 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     allow, which a junction turn needs. With ``keep_turns`` too, band
     simplification keeps every vertex where that polygon turns (:data:`KEEP_TURN`): a long
     leg among short ones there bends the curve (its knots are uniform) beyond the polygon.
+    With ``free`` too, the smooth polygon's bands widen to the vertices' free intervals
+    (:func:`_free_intervals`), for a turn that the bands leave too little room.
 
     ``frame``: the roadmap's :func:`vertex_frame` (computed here if ``None``; both
     polygons of one roadmap share it).
@@ -133,6 +154,7 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if start_heading is not None and not np.isfinite(start_heading):
         raise TrajectoryError(f"start heading must be finite, got {start_heading!r}")
     start, pts, s0, vs, lines = frame.start, frame.pts, frame.s0, frame.vs, frame.lines
+    intervals = frame.free
     reach = float(vs[-1] - s0)
     lead = max(params.lead_in_lengths * rp.vehicle_length, params.lead_in_time * start_speed)
     lead = min(lead, 0.5 * reach)
@@ -145,6 +167,7 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     ahead[-1] = True
     verts, vst = pts[ahead], vs[ahead]
     lines = tuple(a[ahead] for a in lines)
+    intervals = intervals[ahead]
     first = 0 if smooth else int(np.searchsorted(vst, s0 + lead - 1e-9))
     first = min(first, len(verts) - 1)
     if not smooth:
@@ -167,6 +190,12 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if smooth:
         # the vehicle's position and heading point are fixed (bands of zero width)
         fixed = np.zeros(2)
+        if free:
+            # the bands widened to the free intervals (which keep the safety margin)
+            lo_f = np.minimum(centre - half, intervals[first:, 0])
+            hi_f = np.maximum(centre + half, intervals[first:, 1])
+            centre = np.clip(centre, lo_f, hi_f)
+            half = np.minimum(centre - lo_f, hi_f - centre)
         lat = min_turning_offsets(
             np.vstack((start, heading_point, origin)), np.vstack((np.zeros((2, 2)), normal)),
             np.concatenate((fixed, centre - half)), np.concatenate((fixed, centre + half)),
