@@ -292,9 +292,10 @@ def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     The least-bending polygon measures each second difference on the origins' spacing;
     where the sweep lines fan out round a corner, points on the inside stand closer
     together than their origins, so a turn there counts as gentler than it is and the
-    polygon crowds its turn at the inner corner, sharper than the car can turn. Each
-    further round scales the second differences by the last polygon's own legs and, from
-    the third on, weights them up, cumulatively, by ``(turn / target) ** TURN_POWER``
+    polygon crowds its turn at the inner corner, sharper than the car can turn. While the
+    polygon turns somewhere by more than ``target`` (below), each further round scales
+    the second differences by the last polygon's own legs and, from the third on,
+    weights them up, cumulatively, by ``(turn / target) ** TURN_POWER``
     where the polygon's discrete curvature ``turn`` [1/m] (turning angle over the mean of
     the two legs) exceeds ``target = TURN_SHARE * kappa_max`` [1/m]: iteratively
     reweighted least squares towards the polygon of least largest turn (equation (3)'s
@@ -309,9 +310,9 @@ def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     target = TURN_SHARE * kappa_max
     for r in range(rounds - 1):
         turn, legs = _polygon_turns(origin + x[:, None] * normal)
+        if not np.any(turn > target):
+            break
         if r > 0:
-            if not np.any(turn > target):
-                break
             rows = np.minimum(rows * np.maximum(turn / target, 1.0) ** TURN_POWER, TURN_CAP)
         try:
             x = min_bending_offsets(origin, normal, lo, hi, centre, weight, legs=legs,

@@ -370,12 +370,12 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                       end_speed, smooth, frame)
-    if smooth and polish and _too_sharp(traj):
+    if smooth and polish and _too_sharp(traj, params):
         # the curve turns beyond the limit: the smooth polygon keeping its turning vertices
         other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                            end_speed, True, frame, keep_turns=True)
         traj = _less_violating(traj, other, params)
-        if _too_sharp(other):
+        if _too_sharp(other, params):
             # and within the whole free intervals, not only the bands
             other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                                end_speed, True, frame, keep_turns=True, free=True)
@@ -437,9 +437,17 @@ def _less_violating(first: Trajectory, other: Trajectory, params: TrajectoryPara
     return other
 
 
-def _too_sharp(tr: Trajectory) -> bool:
-    """Whether the trajectory breaks the turning limit."""
-    return any(v.kind == "curvature" for v in tr.violations)
+def _too_sharp(tr: Trajectory, params: TrajectoryParams) -> bool:
+    """Whether the trajectory breaks the turning limit, by at most :data:`NEAR_MISS` times
+    it (sharper bends, which the polygon's variants did not mend, are not worth their
+    time)."""
+    return any(v.kind == "curvature" and v.value <= NEAR_MISS * params.kappa_max
+               for v in tr.violations)
+
+
+#: Largest share of the turning limit at which :func:`_plan_polygons` tries the junction
+#: polygon's variants.
+NEAR_MISS = 2.5
 
 
 def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
