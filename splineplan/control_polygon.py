@@ -3,11 +3,12 @@
 
 Band simplification (:func:`band_simplify`) keeps the roadmap vertices that string pulling
 through lateral bands of the free intervals needs; at junction turns the vertices first move
-within their bands to the polygon of least bending (:func:`min_bending_offsets`) and long
-legs are split in gradually growing pieces; the vehicle's position and a heading point lead
-in. Where the curve along level 2's path cannot be made feasible, :func:`detour_roadmap`
-searches the same graph for a path of limited lateral rate. Pure geometry on the roadmap
-and the corridor: no spline and no footprint here.
+within their bands to the polygon of least bending, reweighted so that it spreads its turn
+(:func:`min_turning_offsets`), and long legs are split in gradually growing pieces; the
+vehicle's position and a heading point lead in. Where the curve along level 2's path
+cannot be made feasible, :func:`detour_roadmap` searches the same graph for a path of
+limited lateral rate. Pure geometry on the roadmap and the corridor: no spline and no
+footprint here.
 
 The string pulling, the least-bending active-set loops, the leg splits and the detour's
 dynamic programme are loops compiled with numba (cached on disk after the first run): as
@@ -62,6 +63,7 @@ class VertexFrame:
     s0: float  #: the start's station [m]
     vs: FloatArray  #: (m,) the vertices' stations [m]
     lines: tuple[FloatArray, ...]  #: the vertices' :func:`_vertex_lines`
+    free: FloatArray  #: (m, 2) the vertices' :func:`_free_intervals` [m]
 
 
 def vertex_frame(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams
@@ -99,12 +101,31 @@ def vertex_frame(roadmap: Roadmap, corridor: Corridor, params: TrajectoryParams
     moved = np.abs(lines[3] - sl[1:, 1]) > 1e-9
     pts = pts.copy()
     pts[moved] = lines[0][moved] + lines[3][moved, None] * lines[2][moved]
-    return VertexFrame(start, pts, s0, vs, lines)
+    return VertexFrame(start, pts, s0, vs, lines, _free_intervals(roadmap, distinct, lines))
+
+
+def _free_intervals(roadmap: Roadmap, distinct: NDArray[np.bool_],
+                    lines: tuple[FloatArray, ...]) -> FloatArray:
+    """Each distinct vertex's free interval ``(m, 2)`` [m] (lateral offsets), within level
+    2's band where it has one (no nearer the obstacles than the vertex); the vertex's band
+    of :func:`_vertex_lines` where the roadmap has no graph."""
+    band = np.column_stack((lines[3] - lines[4], lines[3] + lines[4]))
+    path = np.asarray(roadmap.path)
+    if not (len(path) == len(distinct) and len(roadmap.graph_lo) and len(roadmap.graph_hi)):
+        return band
+    lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
+    hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
+    if len(roadmap.band_lo) == len(path):
+        lo = np.maximum(lo, np.asarray(roadmap.band_lo, dtype=float)[distinct])
+        hi = np.minimum(hi, np.asarray(roadmap.band_hi, dtype=float)[distinct])
+    # never narrower than the band (the band reserve may move a vertex off its interval)
+    return np.column_stack((np.minimum(lo, band[:, 0]), np.maximum(hi, band[:, 1])))
 
 
 def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float | None,
                     params: TrajectoryParams, start_speed: float, smooth: bool = False,
-                    frame: VertexFrame | None = None) -> tuple[FloatArray, NDArray[np.int64]]:
+                    frame: VertexFrame | None = None, keep_turns: bool = False,
+                    free: bool = False) -> tuple[FloatArray, NDArray[np.int64]]:
     """Candidate control points ``(c, 2)`` and how often the first curve uses each (0 or 1).
 
     The candidates are the vehicle's position, a heading point ahead of it and the roadmap
@@ -113,11 +134,16 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     farthest vertex that the vehicle's position reaches within the bands (at least the
     lead-in distance ahead).
 
-    With ``smooth``, the vertices beyond the lead-in first move within their bands to the
-    polygon of least bending (:func:`min_bending_offsets`), band simplification then drops
-    those that stand in line, and long legs are split in pieces that grow gradually from
-    the short legs beside them (:func:`_leg_splits`): the first curve then turns as gently
-    as the bands allow, which a junction turn needs.
+    With ``smooth``, every vertex beyond a heading point one sweep line ahead first moves
+    within its band to the polygon of least bending that spreads its turn
+    (:func:`min_turning_offsets`), band simplification then drops those that stand in
+    line, and long legs are split in pieces that grow gradually from the short legs
+    beside them (:func:`_leg_splits`): the first curve then turns as gently as the bands
+    allow, which a junction turn needs. With ``keep_turns`` too, band
+    simplification keeps every vertex where that polygon turns (:data:`KEEP_TURN`): a long
+    leg among short ones there bends the curve (its knots are uniform) beyond the polygon.
+    With ``free`` too, the smooth polygon's bands widen to the vertices' free intervals
+    (:func:`_free_intervals`), for a turn that the bands leave too little room.
 
     ``frame``: the roadmap's :func:`vertex_frame` (computed here if ``None``; both
     polygons of one roadmap share it).
@@ -128,15 +154,21 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if start_heading is not None and not np.isfinite(start_heading):
         raise TrajectoryError(f"start heading must be finite, got {start_heading!r}")
     start, pts, s0, vs, lines = frame.start, frame.pts, frame.s0, frame.vs, frame.lines
+    intervals = frame.free
     reach = float(vs[-1] - s0)
     lead = max(params.lead_in_lengths * rp.vehicle_length, params.lead_in_time * start_speed)
     lead = min(lead, 0.5 * reach)
     head_len = max(min(lead / 2.0, reach / 3.0), 1e-3)
+    if smooth:
+        # the least-bending polygon takes the lateral offset gently by itself: the turn
+        # may begin a sweep line ahead (a lane that bends just ahead of the vehicle)
+        head_len = min(head_len, rp.d)
     ahead = vs > s0 + head_len + rp.d / 2.0
     ahead[-1] = True
     verts, vst = pts[ahead], vs[ahead]
     lines = tuple(a[ahead] for a in lines)
-    first = int(np.searchsorted(vst, s0 + lead - 1e-9))
+    intervals = intervals[ahead]
+    first = 0 if smooth else int(np.searchsorted(vst, s0 + lead - 1e-9))
     first = min(first, len(verts) - 1)
     if not smooth:
         ends = _band_ends(verts, lines[0], lines[2], lines[3], lines[4])
@@ -158,14 +190,23 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     if smooth:
         # the vehicle's position and heading point are fixed (bands of zero width)
         fixed = np.zeros(2)
-        lat = min_bending_offsets(
+        if free:
+            # the bands widened to the free intervals (which keep the safety margin)
+            lo_f = np.minimum(centre - half, intervals[first:, 0])
+            hi_f = np.maximum(centre + half, intervals[first:, 1])
+            centre = np.clip(centre, lo_f, hi_f)
+            half = np.minimum(centre - lo_f, hi_f - centre)
+        lat = min_turning_offsets(
             np.vstack((start, heading_point, origin)), np.vstack((np.zeros((2, 2)), normal)),
             np.concatenate((fixed, centre - half)), np.concatenate((fixed, centre + half)),
-            np.concatenate((fixed, centre)), SMOOTH_CENTRE_WEIGHT)[2:]
+            np.concatenate((fixed, centre)), SMOOTH_CENTRE_WEIGHT, params.kappa_max)[2:]
         verts = verts.copy()
         verts[first:] = origin + lat[:, None] * normal
-        ends = _band_ends(verts[first:], origin, normal, lat,
-                          np.minimum(half, SMOOTH_TOLERANCE))
+        tol = np.minimum(half, SMOOTH_TOLERANCE)
+        if keep_turns:
+            tol = np.where(_turning(np.vstack((heading_point, verts[first:])),
+                                    KEEP_TURN * params.kappa_max), 0.0, tol)
+        ends = _band_ends(verts[first:], origin, normal, lat, tol)
     else:
         ends = ends[first:]
     kept = first + _simplify(ends, origin, tangent)
@@ -196,7 +237,8 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
 # ---- least bending ---------------------------------------------------------------------
 def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
                            hi: FloatArray, centre: FloatArray, weight: float,
-                           max_rounds: int = 30) -> FloatArray:
+                           max_rounds: int = 30, legs: FloatArray | None = None,
+                           rows: FloatArray | None = None) -> FloatArray:
     """Lateral offsets ``(m,)`` [m] of the points ``origin + l * normal`` that minimise the
     sum of squared second differences of the points (the discrete bending of the polyline)
     plus ``weight`` times the squared distance of ``l`` to ``centre``, within ``lo <= l <=
@@ -207,17 +249,100 @@ def min_bending_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     (pentadiagonal, :func:`_bending_system`), solved by banded factorisation, first in a
     primal-dual active-set loop (fast, usually exact), then in a primal active-set loop
     that ends at the optimum (:func:`_min_bending_loops`).
+
+    ``legs`` ``(m - 1,)`` [m]: the leg lengths that the second differences are scaled
+    by (default: the origins' spacing); ``rows`` ``(m - 2,)``: a weight per second
+    difference (default 1). :func:`min_turning_offsets` sets both.
     """
     m = len(origin)
     if m < 3:
         return np.clip(centre, lo, hi)
     f64 = (kernel_floats(a) for a in (origin, normal, centre, lo, hi))
     origin, normal, centre, lo, hi = f64
-    h0, h1, h2, g = _bending_system(origin, normal, centre, float(weight))
+    legs = kernel_floats(np.hypot(*np.diff(origin, axis=0).T) if legs is None else legs)
+    rows = kernel_floats(np.ones(m - 2) if rows is None else rows)
+    h0, h1, h2, g = _bending_system(origin, normal, centre, float(weight), legs, rows)
     x, ok = _min_bending_loops(h0, h1, h2, g, lo, hi, int(max_rounds))
     if not ok:
         raise np.linalg.LinAlgError("the least-bending system is not positive definite")
     return x
+
+
+#: Rounds of :func:`min_turning_offsets` (the first is the least-bending polygon).
+TURN_ROUNDS = 10
+#: Share of the turning limit above which the smooth polygon's vertices (and the two
+#: after each) stay (:func:`_turning`).
+KEEP_TURN = 0.3
+#: Share of the turning limit above which :func:`min_turning_offsets` weights a turn up.
+TURN_SHARE = 0.8
+#: Power of the excess turn in :func:`min_turning_offsets`' weights.
+TURN_POWER = 2.0
+#: Largest weight of a turn in :func:`min_turning_offsets` (against 1 where the polygon
+#: turns gently): heavier rows would make the system ill-conditioned against the pins
+#: that hold offsets at their bounds.
+TURN_CAP = 1e4
+
+
+def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
+                        hi: FloatArray, centre: FloatArray, weight: float, kappa_max: float,
+                        rounds: int = TURN_ROUNDS) -> FloatArray:
+    """Lateral offsets ``(m,)`` [m] like :func:`min_bending_offsets`, re-solved so that the
+    polygon spreads its turn over the room the bands leave.
+
+    The least-bending polygon measures each second difference on the origins' spacing;
+    where the sweep lines fan out round a corner, points on the inside stand closer
+    together than their origins, so a turn there counts as gentler than it is and the
+    polygon crowds its turn at the inner corner, sharper than the car can turn. While the
+    polygon turns somewhere by more than ``target`` (below), each further round scales
+    the second differences by the last polygon's own legs and, from the third on,
+    weights them up, cumulatively, by ``(turn / target) ** TURN_POWER``
+    where the polygon's discrete curvature ``turn`` [1/m] (turning angle over the mean of
+    the two legs) exceeds ``target = TURN_SHARE * kappa_max`` [1/m]: iteratively
+    reweighted least squares towards the polygon of least largest turn (equation (3)'s
+    smoothing, aimed at the turning limit), each weight at most :data:`TURN_CAP`. The
+    offsets stay within ``lo <= l <= hi``.
+    """
+    m = len(origin)
+    x = min_bending_offsets(origin, normal, lo, hi, centre, weight)
+    if m < 3 or rounds <= 1:
+        return x
+    rows = np.ones(m - 2)
+    target = TURN_SHARE * kappa_max
+    for r in range(rounds - 1):
+        turn, legs = _polygon_turns(origin + x[:, None] * normal)
+        if not np.any(turn > target):
+            break
+        if r > 0:
+            rows = np.minimum(rows * np.maximum(turn / target, 1.0) ** TURN_POWER, TURN_CAP)
+        try:
+            x = min_bending_offsets(origin, normal, lo, hi, centre, weight, legs=legs,
+                                    rows=rows)
+        except np.linalg.LinAlgError:  # pragma: no cover - the cap keeps it definite
+            break
+    return x
+
+
+def _turning(pts: FloatArray, kappa: float) -> NDArray[np.bool_]:
+    """Per vertex after the first of a polygon ``(m, 2)`` (``(m - 1,)``): whether it, or
+    one of the two before it, turns by more than ``kappa`` [1/m] (:func:`_polygon_turns`)."""
+    out = np.zeros(len(pts) - 1, dtype=bool)
+    if len(pts) < 3:
+        return out
+    bent = _polygon_turns(pts)[0] > kappa
+    out[:-1] |= bent
+    out[1:] |= bent
+    out[2:] |= bent[:-1]
+    return out
+
+
+def _polygon_turns(pts: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Discrete curvature ``(m - 2,)`` [1/m] at the inner vertices of a polygon ``(m, 2)``
+    (turning angle over the mean of the two legs) and its leg lengths ``(m - 1,)`` [m]."""
+    d = np.diff(pts, axis=0)
+    legs = np.hypot(d[:, 0], d[:, 1])
+    head = np.arctan2(d[:, 1], d[:, 0])
+    turn = np.abs((np.diff(head) + np.pi) % (2.0 * np.pi) - np.pi)
+    return turn / np.maximum((legs[:-1] + legs[1:]) / 2.0, 1e-6), legs
 
 
 #: Stiffness that holds an offset at its bound in :func:`min_bending_offsets`.
@@ -225,25 +350,26 @@ _PIN = 1e8
 
 
 @njit(cache=True)
-def _bending_system(origin: FloatArray, normal: FloatArray, centre: FloatArray, weight: float
+def _bending_system(origin: FloatArray, normal: FloatArray, centre: FloatArray, weight: float,
+                    legs: FloatArray, rows: FloatArray
                     ) -> tuple[FloatArray, ...]:  # pragma: no cover - compiled
     """The quadratic objective of :func:`min_bending_offsets` in the offsets (``m >= 3``):
     the diagonal ``h0`` ``(m,)``, the off-diagonals ``h1`` ``(m - 1,)`` and ``h2``
     ``(m - 2,)`` of its pentadiagonal Hessian, and its gradient ``g`` ``(m,)`` at zero.
 
-    The second differences ``D`` ``(m - 2, m)`` of the points for uneven spacing are
-    curvature-like, weighted by the length each one stands for; the Hessian is
-    ``N^T D^T D N`` (``N``: the normals) plus ``weight`` and a tiny ridge that keeps it
-    definite where nothing else pins the offsets down.
+    The second differences ``D`` ``(m - 2, m)`` of the points for uneven spacing (the leg
+    lengths ``legs`` ``(m - 1,)``) are curvature-like, weighted by the length each one
+    stands for and by ``rows`` ``(m - 2,)``; the Hessian is ``N^T D^T D N`` (``N``: the
+    normals) plus ``weight`` and a tiny ridge that keeps it definite where nothing else
+    pins the offsets down.
     """
     m = len(origin)
     c0, c1, c2 = np.empty(m - 2), np.empty(m - 2), np.empty(m - 2)
     for r in range(m - 2):
-        ha = max(np.hypot(origin[r + 1, 0] - origin[r, 0], origin[r + 1, 1] - origin[r, 1]),
-                 1e-3)
-        hb = max(np.hypot(origin[r + 2, 0] - origin[r + 1, 0],
-                          origin[r + 2, 1] - origin[r + 1, 1]), 1e-3)
-        w = np.sqrt(2.0 / (ha + hb))  # 2 / (ha + hb) * sqrt((ha + hb) / 2)
+        ha = max(legs[r], 1e-3)
+        hb = max(legs[r + 1], 1e-3)
+        # 2 / (ha + hb) * sqrt((ha + hb) / 2), times the row's weight's root
+        w = np.sqrt(2.0 / (ha + hb) * rows[r])
         c0[r], c1[r], c2[r] = w / ha, -w * (1.0 / ha + 1.0 / hb), w / hb
     h0, h1, h2, g = np.zeros(m), np.zeros(m - 1), np.empty(m - 2), np.empty(m)
     dtx, dty = np.zeros(m), np.zeros(m)

@@ -81,7 +81,7 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "_place_kernel": (((F1,) * 7 + (B1,) + (f8,) * 9),),
     }),
     "splineplan.control_polygon": (4.2, {
-        "_bending_system": ((F2, F2, F1, f8),),
+        "_bending_system": ((F2, F2, F1, f8, F1, F1),),
         "_hess": ((F1, F1, F1, F1),),
         "_pinned_solve": ((F1, F1, F1, F1, F1, F1, B1, B1, i8, F2, F1),),
         "_min_bending_loops": ((F1, F1, F1, F1, F1, F1, i8),),

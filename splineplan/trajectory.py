@@ -24,7 +24,15 @@ Steps, and the choices beyond the paper:
    equation (3) has points to move on long straights.
 2. Lead-in: the first roadmap vertex used is the farthest that the vehicle's position
    reaches within the bands (within ``max_control_spacing``), and at least the lead-in
-   distance ahead.
+   distance ahead. Where the road bends tighter than twice the turning radius (a
+   junction turn, a kinked lane), the first polygon is instead the one that spreads the
+   turn over the bands (:func:`~splineplan.control_polygon.min_turning_offsets`: least
+   bending, reweighted towards the least largest turn), from a heading point one sweep
+   line ahead through every vertex; where its curve still turns beyond the limit, the
+   same polygon again with every vertex kept where it turns (a long leg among short
+   ones bends the uniform-knot spline beyond its polygon), and then with the bands
+   widened to the free intervals (which keep the safety margin by construction; within
+   level 2's bands where it placed the vertices).
 3. Repair: a clamped B-spline cuts its polygon's corners (by about
    ``|P_{i-1} - 2 P_i + P_{i+1}| / 6`` for a cubic). Where the first curve's footprint is not
    clear, or where it strays more than ``BAND_TOL`` beyond level 2's bands (the rounding
@@ -362,6 +370,16 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
     traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                       end_speed, smooth, frame)
+    if smooth and polish and _too_sharp(traj, params):
+        # the curve turns beyond the limit: the smooth polygon keeping its turning vertices
+        other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
+                           end_speed, True, frame, keep_turns=True)
+        traj = _less_violating(traj, other, params)
+        if _too_sharp(other, params):
+            # and within the whole free intervals, not only the bands
+            other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
+                               end_speed, True, frame, keep_turns=True, free=True)
+            traj = _less_violating(traj, other, params)
     if not traj.feasible and polish:
         other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                            end_speed, not smooth, frame)
@@ -419,16 +437,31 @@ def _less_violating(first: Trajectory, other: Trajectory, params: TrajectoryPara
     return other
 
 
+def _too_sharp(tr: Trajectory, params: TrajectoryParams) -> bool:
+    """Whether the trajectory breaks the turning limit, by at most :data:`NEAR_MISS` times
+    it (sharper bends, which the polygon's variants did not mend, are not worth their
+    time)."""
+    return any(v.kind == "curvature" and v.value <= NEAR_MISS * params.kappa_max
+               for v in tr.violations)
+
+
+#: Largest share of the turning limit at which :func:`_plan_polygons` tries the junction
+#: polygon's variants.
+NEAR_MISS = 2.5
+
+
 def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                params: TrajectoryParams, start_heading: float | None, start_speed: float,
                end_speed: float | None, smooth: bool = False,
-               frame: VertexFrame | None = None) -> Trajectory:
+               frame: VertexFrame | None = None, keep_turns: bool = False,
+               free: bool = False) -> Trajectory:
     """:func:`plan_trajectory` along the roadmap's chosen path (``smooth``: from the
-    least-bending control polygon, see :func:`_control_points`; ``frame``: the roadmap's
+    least-bending control polygon, ``keep_turns``: keeping its turning vertices, ``free``:
+    within the free intervals, see :func:`_control_points`; ``frame``: the roadmap's
     :func:`~splineplan.control_polygon.vertex_frame`, computed here if ``None``)."""
     rp = roadmap.params
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
-                                   smooth, frame=frame)
+                                   smooth, frame=frame, keep_turns=keep_turns, free=free)
     checker = _Checker.build(corridor, obstacles, rp, pool, params.road_margin)
     band = None
     if len(roadmap.band_lo) == len(roadmap.s):

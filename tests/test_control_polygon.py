@@ -14,8 +14,10 @@ from splineplan.control_polygon import (
     _TOL,
     _band_ends,
     _farthest_from,
+    _polygon_turns,
     band_simplify,
     min_bending_offsets,
+    min_turning_offsets,
 )
 
 
@@ -205,6 +207,53 @@ def test_min_bending_offsets_matches_banded_solver(seed: int, m: int, weight: fl
     args = (origin, normal, lo, hi, centre, weight, max_rounds)
     np.testing.assert_allclose(min_bending_offsets(*args), min_bending_reference(*args),
                                rtol=0.0, atol=1e-9 if weight > 0 else 1e-6)
+
+
+def corner_lines(radius: float, step: float = 1.0, straight: float = 15.0
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Sweep lines (origins and left normals) every ``step`` [m] along a reference line that
+    runs ``straight`` [m] north, turns right by 90 degrees on ``radius`` [m] and runs
+    ``straight`` [m] east, as a lane's centre round a corner of a junction."""
+    s_arc = 0.5 * np.pi * radius
+    s = np.arange(0.0, 2 * straight + s_arc + 1e-9, step)
+    pts, heads = [], []
+    for v in s:
+        if v <= straight:
+            pts.append((0.0, v))
+            heads.append(0.5 * np.pi)
+        elif v <= straight + s_arc:
+            a = (v - straight) / radius
+            pts.append((radius - radius * np.cos(a), straight + radius * np.sin(a)))
+            heads.append(0.5 * np.pi - a)
+        else:
+            pts.append((radius + v - straight - s_arc, straight + radius))
+            heads.append(0.0)
+    h = np.asarray(heads)
+    return np.asarray(pts), np.column_stack((-np.sin(h), np.cos(h)))
+
+
+@pytest.mark.parametrize("radius", [1.5, 3.2, 5.0])
+def test_min_turning_offsets_spread_a_corner_within_the_bands(radius: float) -> None:
+    """Round a right-angled corner with bands of +-1.6 m (a two-lane road's free interval
+    for the car): the least-bending polygon crowds its turn on the inside, where the sweep
+    lines fan in, and turns on less than the 4.2 m limit when the reference line turns on
+    1.5 m; the reweighted polygon stays within the bands, turns less sharply at its
+    sharpest, and keeps within the limit wherever the least-bending one does not."""
+    origin, normal = corner_lines(radius)
+    m = len(origin)
+    centre = np.zeros(m)
+    lo, hi = centre - 1.6, centre + 1.6
+    lo[:2] = hi[:2] = 0.0  # the vehicle's position and heading point
+    kappa_max = 1.0 / 4.2
+    bend = min_bending_offsets(origin, normal, lo, hi, centre, 1e-4)
+    turn = min_turning_offsets(origin, normal, lo, hi, centre, 1e-4, kappa_max)
+    assert np.all((turn >= lo - 1e-9) & (turn <= hi + 1e-9))
+    worst_bend = _polygon_turns(origin + bend[:, None] * normal)[0].max()
+    worst_turn = _polygon_turns(origin + turn[:, None] * normal)[0].max()
+    assert worst_turn <= worst_bend + 1e-9
+    if radius == 1.5:
+        assert worst_bend > kappa_max
+    assert worst_turn <= kappa_max
 
 
 @settings(max_examples=40, deadline=None)

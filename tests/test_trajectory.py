@@ -349,6 +349,24 @@ def test_road_margin_lets_a_bend_use_the_whole_lane() -> None:
     assert np.abs(tr.curvature).max() <= TrajectoryParams().kappa_max * (1 + 1e-6)
 
 
+def test_where_no_curve_is_feasible_the_one_on_the_road_is_kept() -> None:
+    """An 80 degree kink of one 3.0 m lane, too sharp for the car: the least-bending
+    polygon's curve leaves the lane, other curves stay on it but turn tighter than the
+    vehicle can. All are infeasible; the one kept is on the road (footprint before
+    curvature)."""
+    from splineplan.trajectory import _plan_once
+
+    corridor, _ = kinked_lane(80.0, 3.0)
+    rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), RoadmapParams())
+    tp = TrajectoryParams()
+    smooth = _plan_once(rm, corridor, Obstacles.empty(), tp, 0.0, 0.0, None, True)
+    assert float(np.min(smooth.clearance_road)) < -0.03
+    tr = plan_trajectory(rm, corridor, Obstacles.empty(), tp, 0.0)
+    assert not tr.feasible
+    assert float(np.min(tr.clearance_road)) >= tr.road_margin - 1e-6
+    assert float(np.max(np.abs(tr.curvature))) > tp.kappa_max
+
+
 @settings(max_examples=15, deadline=None)
 @given(angle=st.floats(5.0, 80.0), left=st.booleans(), width=st.floats(3.0, 3.6),
        start=st.floats(-0.3, 0.3), road_margin=st.sampled_from([0.0, 0.15, 0.3]))
