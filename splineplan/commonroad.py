@@ -83,6 +83,10 @@ MOVING_MARGIN = 0.5
 #: How far [m] beyond the goal the corridor runs (the goal lanelets' successors), so
 #: that the curve does not end on the goal's edge.
 RUN_ON = 40.0
+#: How far inside the goal's lateral extent [m] the vehicle's centre keeps where it passes
+#: the goal (see :func:`goal_keep`), and how fast that band widens away from it [m/m].
+GOAL_INSET = 0.2
+GOAL_TAPER = 0.15
 
 
 def _require() -> None:
@@ -762,14 +766,14 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     end_speed = 0.0 if road_ends else None
     obstacles = statics
     t0 = float(init.time_step) * problem.dt
+    v_start = min(v0, tp.s_max)
     try:
-        tr = plan_corridor(corridor, obstacles, centre0, head0, roadmap_params=rp, params=tp,
-                           start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
+        corridor, tr = _through_goal(corridor, goal, obstacles, centre0, head0, rp, tp,
+                                     v_start, end_speed)
     except RoadBlockedError:
         # the route's lanes are blocked: the oncoming lane beside them is passing space
-        corridor = route_corridor(net, route, statics, passing=True)
-        tr = plan_corridor(corridor, obstacles, centre0, head0, roadmap_params=rp, params=tp,
-                           start_speed=min(v0, tp.s_max), end_speed=end_speed).trajectory
+        corridor, tr = _through_goal(route_corridor(net, route, statics, passing=True), goal,
+                                     obstacles, centre0, head0, rp, tp, v_start, end_speed)
     # a curve from the start: its tangent is the centre's direction, turned from the
     # body's orientation by the slip angle of the curve's first curvature (the wheels then
     # start at the curve's angle); the slip that the path planned with it has, by the
@@ -814,6 +818,67 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     reached = bool(pp.goal.is_reached(states[-1]))
     return CommonRoadPlan(problem, car, goal, route, corridor, obstacles, tr, states, reached,
                           yielded, passed, seconds)
+
+
+def _through_goal(corridor: Corridor, goal: Goal, obstacles: Obstacles, centre: FloatArray,
+                  heading: float, rp: RoadmapParams, tp: TrajectoryParams, start_speed: float,
+                  end_speed: float | None) -> tuple[Corridor, Trajectory]:
+    """The corridor and the first trajectory along it: through the goal's position
+    (:func:`goal_keep`), unless the path through it is not feasible or cannot be driven at
+    the start's speed (a goal beside the lane just ahead) where the plain corridor's is."""
+    from splineplan.planner import plan_corridor
+
+    def first(cor: Corridor) -> Trajectory:
+        return plan_corridor(cor, obstacles, centre, heading, roadmap_params=rp, params=tp,
+                             start_speed=start_speed, end_speed=end_speed).trajectory
+
+    kept = goal_keep(corridor, goal)
+    if kept is corridor:
+        return corridor, first(corridor)
+    try:
+        tr = first(kept)
+        if tr.feasible and tr.speed[0] >= start_speed - 1e-6:
+            return kept, tr
+    except RoadBlockedError:
+        tr = None
+    plain = first(corridor)
+    if tr is None or (plain.feasible and plain.speed[0] >= start_speed - 1e-6):
+        return corridor, plain
+    return kept, tr
+
+
+def goal_keep(corridor: Corridor, goal: Goal) -> Corridor:
+    """The corridor whose vehicle centre keeps, where it passes the goal's position, to the
+    part of the road that the goal covers (the goal asks for the car's centre there; a goal
+    box where a recorded car was is often narrower than the lane, or in the lane beside the
+    path's). The keep offsets (level 2's sweep lines) narrow to the goal's lateral extent,
+    less :data:`GOAL_INSET` each side, and widen again at :data:`GOAL_TAPER` metres per metre
+    before and after it."""
+    shapes = [sh for sh in goal.shapes if sh is not None]
+    if not shapes:
+        return corridor
+    st = np.asarray(corridor.s, dtype=float)
+    hi = np.full(len(st), UNBOUNDED) if corridor.keep_left is None else corridor.keep_left.copy()
+    lo = (np.full(len(st), -UNBOUNDED) if corridor.keep_right is None
+          else corridor.keep_right.copy())
+    changed = False
+    for shape in shapes:
+        outline = np.asarray(shape.exterior.coords if hasattr(shape, "exterior")
+                             else shape.convex_hull.exterior.coords, dtype=float)
+        sl = corridor.to_sl(outline)
+        s0, s1 = float(sl[:, 0].min()), float(sl[:, 0].max())
+        if s1 <= st[0] or s0 >= st[-1]:
+            continue  # beyond the corridor
+        l0, l1 = float(sl[:, 1].min()) + GOAL_INSET, float(sl[:, 1].max()) - GOAL_INSET
+        if l1 < l0:
+            l0 = l1 = float((sl[:, 1].min() + sl[:, 1].max()) / 2.0)
+        away = np.maximum(np.maximum(s0 - st, st - s1), 0.0) * GOAL_TAPER
+        hi = np.minimum(hi, l1 + away)
+        lo = np.maximum(lo, l0 - away)
+        changed = True
+    if not changed:
+        return corridor
+    return replace(corridor, keep_left=hi, keep_right=lo)
 
 
 def driven(result: CommonRoadPlan) -> Trajectory:

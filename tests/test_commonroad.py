@@ -158,3 +158,35 @@ def test_the_command_writes_the_solution_and_the_picture(tmp_path: Path) -> None
                  "--plot"]) == 0
     names = sorted(p.name for p in out.iterdir())
     assert names == ["ZAM_Urban-3_1.png", "solution_KS2:SM1:ZAM_Urban-3_1:2018b.xml"]
+
+
+def test_the_path_passes_through_a_goal_box_beside_its_lane() -> None:
+    """A goal where a recorded car was is often a box narrower than a lane, or in the lane
+    beside the path's: the car's centre must pass through it. On a straight three-lane road
+    (9.6 m), from the right lane, a 2 x 1.6 m goal box in the left lane 80 m ahead: the
+    trajectory's centre passes through the box (shapely) with the goal's keep offsets, and
+    stays in its own lane without them."""
+    from shapely.geometry import Point, box
+
+    from splineplan.corridor import Corridor
+    from splineplan.planner import plan_corridor
+
+    line = np.column_stack((np.linspace(0.0, 200.0, 201), np.zeros(201)))
+    road = Corridor.from_reference(line, np.full(201, 4.8), np.full(201, -4.8))
+    goal_box = box(79.0, 2.4, 81.0, 4.0)
+    goal = cr.Goal(steps=((0, 10**6),), shapes=(goal_box,), speed=(None,),
+                   orientation=(None,), lanelets=())
+    start = np.array([5.0, -3.2])
+
+    def through(corridor: Corridor) -> bool:
+        tr = plan_corridor(corridor, None, start, 0.0, start_speed=10.0).trajectory
+        assert tr.feasible
+        return any(goal_box.contains(Point(x, y)) for x, y in tr.xy)
+
+    assert not through(road)
+    kept = cr.goal_keep(road, goal)
+    assert through(kept)
+    lo, hi = kept.keep_at(np.array([80.0, 0.0]))
+    assert lo[0] == pytest.approx(2.4 + cr.GOAL_INSET)
+    assert hi[0] == pytest.approx(4.0 - cr.GOAL_INSET)
+    assert hi[1] - lo[1] > 20.0  # far from the goal the whole road will do
