@@ -448,6 +448,8 @@ SMOOTH_ROOM = 0.02
 #: Share of the speed below which the steering rate must hold the car for
 #: :func:`smooth_steering` to smooth there.
 SMOOTH_GAIN = 0.05
+#: Rounds without a kept move after which :func:`smooth_steering` stops.
+SMOOTH_PATIENCE = 3
 #: The moves :func:`_smooth_move` tries, in order: (target of :func:`_smooth_targets`,
 #: share of the way there).
 SMOOTH_STEPS = ((0.0, 1.0), (0.0, 0.5), (2.0, 0.5), (0.0, 0.25), (2.0, 0.25), (1.0, 0.5),
@@ -517,7 +519,8 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
         ds[j] = np.hypot(pos[j, 0] - pos[j - 1, 0], pos[j, 1] - pos[j - 1, 1])
     corner, steer = allowed_speeds(pos, d1, d2, 0, m, wheelbase, rate, mu_g, s_max)
     changed = True
-    while tried < max_moves:
+    idle = 0  # rounds since a move was kept
+    while tried < max_moves and idle < SMOOTH_PATIENCE:
         if changed:
             # the speed the car would drive without the steering's limit (accelerating
             # from the start, braking for the curves ahead): only where the steering holds
@@ -543,11 +546,13 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
         if len(chosen) == 0:
             break
         tried += len(chosen)
+        idle += 1
         for i in chosen:
             if _smooth_move(i, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
                             hi, wheelbase, rate, mu_g, s_max, kappa_cap, checker):
                 accepted += 1
                 changed = True
+                idle = 0
                 # the limits of the changed samples, with a step each side
                 a0, b0 = max(lo[i] - 2, 0), min(hi[i] + 2, m)
                 lc, ls = allowed_speeds(pos, d1, d2, a0, b0, wheelbase, rate, mu_g, s_max)
@@ -617,26 +622,42 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
         dy = frac * (targets[target, 1] - ctrl[i, 1])
         if np.hypot(dx, dy) < 1e-6:
             continue
-        new_k = kappa_cap
-        for t in range(q):
-            j = a + t
-            r = i - first[j]
-            u = j - a0
-            npos[u, 0] = pos[j, 0] + basis[0, r, j] * dx
-            npos[u, 1] = pos[j, 1] + basis[0, r, j] * dy
-            ne1[u, 0] = d1[j, 0] + basis[1, r, j] * dx
-            ne1[u, 1] = d1[j, 1] + basis[1, r, j] * dy
-            ne2[u, 0] = d2[j, 0] + basis[2, r, j] * dx
-            ne2[u, 1] = d2[j, 1] + basis[2, r, j] * dy
-            kap[t] = abs(curvature(ne1[u, 0], ne1[u, 1], ne2[u, 0], ne2[u, 1]))
-            new_k = max(new_k, kap[t])
-        if new_k > old_k + 1e-12:
-            continue
-        c1, s1 = allowed_speeds(npos, ne1, ne2, 0, b0 - a0, wheelbase, rate, mu_g, s_max)
-        new_v = np.inf
-        for t in range(b0 - a0):
-            new_v = min(new_v, c1[t], s1[t])
-        if not new_v > old_v * (1.0 + 1e-6):
+        # the stretch's samples in order, each refusing the move as soon as its curvature
+        # or its speed limit (cornering, or the steering's over the step from the sample
+        # before) is no better than the stretch's lowest before the move
+        good = True
+        prev = limit_prev = np.inf
+        for u in range(b0 - a0):
+            j = a0 + u
+            if a <= j < b:
+                r = i - first[j]
+                npos[u, 0] = pos[j, 0] + basis[0, r, j] * dx
+                npos[u, 1] = pos[j, 1] + basis[0, r, j] * dy
+                ne1[u, 0] = d1[j, 0] + basis[1, r, j] * dx
+                ne1[u, 1] = d1[j, 1] + basis[1, r, j] * dy
+                ne2[u, 0] = d2[j, 0] + basis[2, r, j] * dx
+                ne2[u, 1] = d2[j, 1] + basis[2, r, j] * dy
+            kap_u = curvature(ne1[u, 0], ne1[u, 1], ne2[u, 0], ne2[u, 1])
+            if a <= j < b:
+                kap[j - a] = abs(kap_u)
+                if kap[j - a] > old_k + 1e-12:
+                    good = False
+                    break
+            corner = min(s_max, np.sqrt(mu_g / abs(kap_u))) if kap_u != 0.0 else s_max
+            delta = steering_angle(kap_u, wheelbase)
+            limit = corner
+            if u > 0:
+                turn = abs(delta - prev)
+                if turn > 0.0:
+                    step_limit = rate * np.hypot(npos[u, 0] - npos[u - 1, 0],
+                                                 npos[u, 1] - npos[u - 1, 1]) / turn
+                    limit = min(limit, step_limit)
+                    limit_prev = min(limit_prev, step_limit)
+                if not limit_prev > old_v * (1.0 + 1e-6):
+                    good = False
+                    break
+            prev, limit_prev = delta, limit
+        if not good or not limit_prev > old_v * (1.0 + 1e-6):
             continue
         for t in range(q):
             u = a + t - a0
