@@ -239,3 +239,36 @@ def test_ego_tables_default_ids_and_dimensions(tmp_path: Path) -> None:
     second = sc.for_vehicle(sc.egos[1])
     assert second.roadmap.vehicle_length == 6.0 and second.trajectory.s_max == 10.0
     assert sc.for_vehicle(sc.egos[2]).trajectory.s_max == sc.trajectory.s_max
+
+
+def test_planned_vehicle_keeps_to_its_lane_among_sumo_traffic(tmp_path: Path) -> None:
+    """On a street of two lanes one way, a planned vehicle among SUMO's cars drives within
+    one lane (SUMO has it on one lane only, and the drivers of the other lane do not see
+    a part of it that reaches into theirs), so that SUMO's cars passing it in the other
+    lane never touch it."""
+    rou = tmp_path / "r.rou.xml"
+    cars = "\n".join(
+        f'<vehicle id="c{k}" depart="{2.0 * k:g}" departLane="1" departPos="5" '
+        f'departSpeed="max" type="car"><route edges="A1B1 B1C1 C1D1"/></vehicle>'
+        for k in range(1, 6))
+    rou.write_text(f"""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger" lcStrategic="-1"
+       lcSpeedGain="0" lcKeepRight="0"/>
+<vehicle id="p" depart="0" departLane="0" departPos="20" type="car">
+  <route edges="A1B1 B1C1 C1D1"/></vehicle>
+{cars}
+</routes>""")
+    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=45.0)
+    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    d = r.vehicles["p"].driven
+    # the corridor of a street spans both lanes, its reference the line between them:
+    # within a lane, the centre keeps half the car's width from that line
+    half = sc.ego.width / 2.0
+    on_street = [abs(float(lat)) for lat, lane, st in zip(d["lateral"], d["lane"],
+                                                          d["station"], strict=True)
+                 if not str(lane).startswith(":") and st > 25.0]
+    assert len(on_street) > 100
+    assert min(on_street) >= half - 0.05
+    assert r.metrics["pairs"]["collision_pairs_planned"] == []
+    assert r.vehicles["p"].metrics["time_off_road"] == 0.0
+

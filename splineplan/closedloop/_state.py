@@ -73,6 +73,7 @@ class DriverState:
     priority: int
     publish: bool
     keep_plans: bool
+    keep_lane: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
     waiting_for: tuple[str, ...]
     board_seen: int  # the board's count of plans when this one last planned

@@ -105,6 +105,7 @@ class Driver(Replanning, Control):
         self.priority = 0  # lower plans first (the order of entering)
         self.publish = False  # whether it publishes its plans (several planned vehicles)
         self.keep_plans = True  # keep every plan for pictures (a single ego's run)
+        self.keep_lane = False  # plan within its lane first (among SUMO's traffic)
         self.published_plan: Any = None
         self.waiting_for: tuple[str, ...] = ()
         self.trusted: dict[str, Any] = {}

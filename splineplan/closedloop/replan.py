@@ -14,12 +14,14 @@ from typing import Any
 import numpy as np
 
 from splineplan.closedloop.cooperate import WAIT_REPLAN, plans_before
+from splineplan.closedloop.lanes import lane_band
 from splineplan.closedloop.perception import Perception
 from splineplan.corridor import Corridor
 from splineplan.errors import (
     GeometryError,
     NoRouteError,
     RoadBlockedError,
+    SplineplanError,
     TrajectoryError,
 )
 from splineplan.geometry import FloatArray
@@ -214,8 +216,16 @@ class Replanning(Perception):
         Moving vehicles beside the ego (:meth:`_moving_obstacles`) are planned around too
         where that gives a trajectory that keeps the safety margin; otherwise the plan is
         made among the stopped obstacles alone and the moving vehicles are left to the
-        time-gap speed control.
+        time-gap speed control. A vehicle that keeps to its lane (``keep_lane``, among
+        SUMO's traffic: :mod:`.lanes`) plans within its lane first, where the moving
+        vehicles beside it are in other lanes and left to SUMO's drivers and the time gap.
         """
+        if self.keep_lane:
+            ok, err = self._plan_among(obstacles, None, in_lane=True)
+            if ok:
+                return ok, err
+            log.debug("t=%.1f no plan within the lane (%s): planning on the whole road",
+                      self.time, err)
         moving = self._moving_obstacles()
         if len(moving):
             ok, err = self._plan_among(obstacles, moving)
@@ -225,9 +235,10 @@ class Replanning(Perception):
                       "among the stopped obstacles only", self.time, err)
         return self._plan_among(obstacles, None)
 
-    def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None
-                    ) -> tuple[bool, Any]:
-        """Levels 2 and 3 among ``obstacles`` (and ``moving``, strictly: any failure or a
+    def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None, *,
+                    in_lane: bool = False) -> tuple[bool, Any]:
+        """Levels 2 and 3 among ``obstacles`` (and ``moving``, or ``in_lane``: within the
+        vehicle's lane, :func:`.lanes.lane_band`; both strictly: any failure or a
         trajectory short of the margin is a refusal, never a truncated plan)."""
         from splineplan.planner import plan_corridor
 
@@ -245,12 +256,19 @@ class Replanning(Perception):
         everything = obstacles if moving is None else obstacles + moving
         try:
             window = self.corridor.slice(s0, s1)
+            if in_lane:
+                width = self._lane_width()
+                if width is None:
+                    return False, TrajectoryError(f"no lanes known for edge "
+                                                  f"'{self._edge_at(self.station)}'")
+                window = lane_band(window, self.station - s0, self.lateral,
+                                   lane_width=width, half_width=ego.width / 2.0)
             roadmaps, traj = plan_corridor(
                 window, everything, self.pose[:2], float(self.pose[2]),
                 roadmap_params=sc.roadmap, params=sc.trajectory,
                 start_speed=float(self.v), end_speed=0.0 if final else None)
         except RoadBlockedError as err:
-            if moving is not None:
+            if moving is not None or in_lane:
                 return False, err
             blocked = err
             if blocked.edge is None:
@@ -265,8 +283,11 @@ class Replanning(Perception):
         bad = np.flatnonzero(np.asarray(traj.clearance_obstacles)
                              < sc.roadmap.safety_margin - 1e-6)
         usable = None
-        if len(bad) and moving is not None:
-            return False, TrajectoryError("trajectory comes too near the traffic beside")
+        if len(bad) and (moving is not None or in_lane):
+            return False, TrajectoryError("trajectory comes too near the traffic beside"
+                                          if moving is not None else
+                                          "trajectory within the lane comes too near an "
+                                          "obstacle")
         if len(bad):
             # level 3 reports a curve that comes closer than the margin: drive only the part
             # that keeps clear, stop before the rest, and replan on the way
@@ -289,6 +310,16 @@ class Replanning(Perception):
                                             length=ego.length, width=ego.width)
         return True, None
 
+    def _lane_width(self) -> float | None:
+        """Width [m] of the lanes of the route's edge where the vehicle is (``None``: none
+        known)."""
+        edge = self._edge_at(self.station)
+        try:
+            lanes = [ln for ln in self.net.lanes_of(edge) if ln.allows(self.sc.ego.vclass)]
+        except (LookupError, SplineplanError):
+            return None
+        return float(min(ln.width for ln in lanes)) if lanes else None
+
     def _new_plans_near(self) -> list[str]:
         """Vehicles before this one that published a plan near the current path since this
         one planned (it plans again among them)."""
@@ -303,7 +334,6 @@ class Replanning(Perception):
         """The trajectory retimed among the published plans of the vehicles before this
         one (:mod:`.cooperate`); its path planned again around the first whose margin speed
         alone cannot keep."""
-        from splineplan.errors import SplineplanError
         from splineplan.planner import plan_corridor
         from splineplan.spacetime import retime
 

@@ -1,0 +1,81 @@
+"""Lane keeping for planned vehicles among SUMO's traffic (pure; no SUMO).
+
+SUMO puts a vehicle moved with ``moveToXY`` on one lane only: the part of it that reaches
+into the neighbouring lane is not seen by that lane's drivers (they drive into it), nor by
+SUMO's collision check. Level 2 left alone centres a vehicle in the free road, which on a
+road of two lanes one way is the line between them. :func:`lane_band` bounds the centre of
+the vehicle to one lane on each edge of the window (the corridor's keep offsets, which the
+roadmap honours), so that its footprint stays within the lane SUMO has it on; where the
+route needs another lane before a junction (the corridor's own keep offsets), the band
+gives way to those some metres before, and a lane blocked by a stopped vehicle or an
+obstacle falls back to the whole road (the roadmap's own rule for keep offsets).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from splineplan.corridor import UNBOUNDED, Corridor
+
+#: Stations [m] before a needed change of lane from which the band no longer holds (the
+#: room for the change).
+CHANGE_ROOM = 30.0
+#: Least half width [m] of the band for the centre.
+MIN_SLACK = 0.2
+
+
+def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: float,
+              half_width: float) -> Corridor:
+    """``window`` with its keep offsets narrowed to one lane on each edge.
+
+    Parameters
+    ----------
+    window
+        The corridor the vehicle plans on (stations from 0).
+    station, lateral
+        The vehicle's centre on ``window`` [m]: its lane on the current edge (in a
+        junction, on the edge it comes out on) is the one this lies in, counted from the
+        right boundary in lanes of ``lane_width`` [m]; on the edges after, the lane of the
+        same index (or the leftmost, on fewer lanes).
+    half_width
+        Half the vehicle's width [m]: the centre keeps ``lane_width / 2 - half_width``
+        (at least :data:`MIN_SLACK`) from the lane's centre line.
+
+    Junction stretches keep the window's own keep offsets; so do the stations from
+    :data:`CHANGE_ROOM` before the first where the lane of the band does not lead on.
+    """
+    if lane_width <= 0.0:
+        return window
+    s = window.s
+    right, left = window.bounds_at(s)
+    k_lo, k_hi = window.keep_at(s)
+    lanes = np.maximum(np.rint((left - right) / lane_width), 1.0)
+    gaps = (list(zip(window.edge_ends[:-1].tolist(), window.edge_starts[1:].tolist(),
+                     strict=True)) if len(window.edge_ends) else [])  # the junctions
+    at = station
+    for end, nxt in gaps:
+        if end < station < nxt:  # in a junction: the lane it comes out on
+            at = nxt
+    r0, l0 = window.bounds_at(at)
+    here = int(np.clip(math.floor((lateral - float(r0)) / lane_width), 0,
+                       max(round((float(l0) - float(r0)) / lane_width), 1) - 1))
+    index = np.minimum(float(here), lanes - 1.0)
+    slack = max(0.5 * lane_width - half_width, MIN_SLACK)
+    centre = right + (index + 0.5) * lane_width
+    b_lo, b_hi = centre - slack, centre + slack
+    band = np.ones(len(s), dtype=bool)
+    for end, nxt in gaps:
+        band &= ~((s > end) & (s < nxt))
+    new_lo, new_hi = np.maximum(k_lo, b_lo), np.minimum(k_hi, b_hi)
+    apart = band & (new_lo > new_hi)  # the route needs another lane here
+    if apart.any():
+        band &= s < float(s[np.argmax(apart)]) - CHANGE_ROOM
+    new_lo = np.where(band, new_lo, k_lo)
+    new_hi = np.where(band, new_hi, k_hi)
+    if not band.any():
+        return window
+    return replace(window, keep_left=np.minimum(new_hi, UNBOUNDED),
+                   keep_right=np.maximum(new_lo, -UNBOUNDED))
