@@ -272,3 +272,27 @@ def test_planned_vehicle_keeps_to_its_lane_among_sumo_traffic(tmp_path: Path) ->
     assert r.metrics["pairs"]["collision_pairs_planned"] == []
     assert r.vehicles["p"].metrics["time_off_road"] == 0.0
 
+
+
+def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
+    """A car crawls just beyond a junction: a planned vehicle coming up behind it stops
+    before the junction, as SUMO's drivers do, rather than in it, where it would stand in
+    the way of the crossing traffic; it never enters the junction while there is no room
+    behind that car."""
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text("""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vType id="crawl" length="4.5" width="1.8" vClass="passenger" maxSpeed="0.05"/>
+<vehicle id="q" depart="0" departLane="0" departPos="7" departSpeed="0" type="crawl">
+  <route edges="B1C1 C1D1"/></vehicle>
+<vehicle id="p" depart="0" departLane="0" departPos="60" type="car">
+  <route edges="A1B1 B1C1 C1D1"/></vehicle>
+</routes>""")
+    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=25.0)
+    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    d = r.vehicles["p"].driven
+    lanes = [str(lane) for lane in d["lane"]]
+    assert not any(lane.startswith(":B1") for lane in lanes)
+    assert lanes[-1] == "A1B1_0" and float(d["speed"][-1]) < 0.1
+    assert r.vehicles["p"].metrics["stuck"] == [] or all(
+        "junction clear" in s["why"] for s in r.vehicles["p"].metrics["stuck"])

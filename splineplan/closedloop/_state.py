@@ -74,6 +74,7 @@ class DriverState:
     publish: bool
     keep_plans: bool
     keep_lane: bool
+    keep_clear: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
     waiting_for: tuple[str, ...]
     board_seen: int  # the board's count of plans when this one last planned
@@ -95,6 +96,7 @@ class DriverState:
     _ref_len: FloatArray
     _ref_heading: FloatArray
     _edge_starts: list[float]
+    _junction_spans: list[tuple[float, float]]
     _beside_at: tuple[float, float] | None
     _beside_was: tuple[np.ndarray, FloatArray]
     _cand_at: tuple[float, float] | None

@@ -26,6 +26,9 @@ PATH_MARGIN = 0.15
 #: vehicle it must yield to; it stops this far [m] before the area to let that one pass.
 YIELD_GAP = 1.5
 YIELD_STOP = 1.0
+#: A vehicle in the path slower than this [m/s] stands in a queue: the ego keeps a junction
+#: clear rather than stand inside it behind that vehicle (``keep_clear``).
+QUEUE_SPEED = 1.0
 #: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
 STOPPED_FOE_SPEED = 0.1
 #: The closed loop's emergency deceleration, a multiple of the planner's ``b_max``: the
@@ -121,6 +124,7 @@ class Control(Perception):
         sim = sc.sim
         cap = math.inf
         gap_to = -1  # the vehicle (in self.others) whose gap caps the speed
+        stop_front: float | None = None  # station on the path [m] the front stops at
         o = self.others
         reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
         if o.n:
@@ -161,14 +165,43 @@ class Control(Perception):
                 c = safe_speed(gap, v_l, tp.b_max, sim.time_gap)
                 if c < cap:
                     cap, gap_to = c, j
+                    # where its front will stand behind a vehicle that (nearly) stands
+                    stop_front = (full_s[first] - sim.min_gap if v_l < QUEUE_SPEED
+                                  else None)
         if gap_to >= 0:
             self.why_slow = f"keeping its gap to vehicle '{o.ids[gap_to]}' ahead"
+            if self.keep_clear and stop_front is not None:
+                clear = self._keep_clear_speed(stop_front)
+                if clear < cap:
+                    cap = clear
+                    self.why_slow = (f"keeping the junction clear: vehicle "
+                                     f"'{o.ids[gap_to]}' stands beyond it")
         red, give = self._red_light_speed(), self._yield_speed()
         if red < cap:
             cap, self.why_slow = red, "stopping at a red light"
         if give < cap:
             cap = give  # (why_slow set by _yield_speed)
         return cap, int(math.isfinite(cap))
+
+    def _keep_clear_speed(self, stop_front: float) -> float:
+        """Speed cap [m/s] that keeps a junction clear, as SUMO's drivers do: where the
+        vehicle would come to stand inside the next junction on its route (its front at
+        ``stop_front``, a station on its path, behind a vehicle that stands beyond), it
+        stops :data:`YIELD_STOP` before the junction instead, if it still can at its
+        emergency braking; once inside, it goes on."""
+        ego, b = self.sc.ego, self.sc.trajectory.b_max
+        front = self.station + ego.length / 2.0
+        stop = self.station + (stop_front - self.u)  # on the route
+        for j_in, j_out in self._junction_spans:
+            if j_in < front:
+                continue  # passed, or in it
+            if stop <= j_in or stop - ego.length >= j_out:
+                break  # stands before the junction, or behind it
+            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * (j_in - front):
+                break  # cannot stop before it
+            room = j_in - front - YIELD_STOP
+            return math.sqrt(max(2.0 * b * (room - self.v * self.dt), 0.0))
+        return math.inf
 
     def _keeps_to_plan(self, j: int, path_heading: float) -> bool:
         """Whether vehicle ``j`` (of ``self.others``), whose published plan the current

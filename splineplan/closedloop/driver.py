@@ -106,6 +106,7 @@ class Driver(Replanning, Control):
         self.publish = False  # whether it publishes its plans (several planned vehicles)
         self.keep_plans = True  # keep every plan for pictures (a single ego's run)
         self.keep_lane = False  # plan within its lane first (among SUMO's traffic)
+        self.keep_clear = False  # stop before a junction it could not leave
         self.published_plan: Any = None
         self.waiting_for: tuple[str, ...] = ()
         self.trusted: dict[str, Any] = {}

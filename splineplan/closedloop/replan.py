@@ -109,6 +109,11 @@ class Replanning(Perception):
                           self._ref_len * self._ref_len)
         self._ref_s = np.asarray(corridor.s, dtype=float).tolist()
         self._edge_starts = np.asarray(corridor.edge_starts, dtype=float).tolist()
+        # the junctions on the route: from an edge's end to the next edge's start [m]
+        ends = np.asarray(corridor.edge_ends, dtype=float).tolist()
+        self._junction_spans = ([(a, b) for a, b in zip(ends[:-1], self._edge_starts[1:],
+                                                         strict=True) if b > a]
+                                if len(ends) == len(self._edge_starts) else [])
         self._obs_cache = {}
         i = len(edges) - 1
         goal_len = self.net.length_of(ego.goal_edge)
