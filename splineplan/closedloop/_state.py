@@ -85,6 +85,9 @@ class DriverState:
     signals: Signals
     _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
     _pl: tuple[list[float], ...]
+    _pl_np: tuple[FloatArray, FloatArray]
+    _times_key: tuple[float, float] | None
+    _times: tuple[int, list[float], list[float]]
     _full: tuple[list[float], ...]
     _ahead_box: tuple[list[float], ...]
     _sample_step: float

@@ -278,20 +278,52 @@ class Control(Perception):
 
     def _time_along_plan(self, dist: float) -> float:
         """Time [s] the ego takes to drive ``dist`` [m] along its plan from where it is,
-        at the plan's speeds but no faster than accelerating from its speed at ``a_max``."""
+        at the plan's speeds but no faster than accelerating from its speed at ``a_max``.
+
+        The times to the plan's samples ahead are summed once per step
+        (:meth:`_plan_times`), the same sums in the same order as a walk along them."""
         ps, _, _, _, pv2 = self._pl
-        a2 = 2.0 * self.sc.trajectory.a_max
-        u0, end = self.u, min(self.u + dist, ps[-1])
-        t, u, v = 0.0, u0, self.v
-        i = bisect.bisect_right(ps, u0)
-        while u < end - 1e-9:
-            nxt = min(ps[i], end) if i < len(ps) else end
-            v_next = max(min(math.sqrt(max(_interp(nxt, ps, pv2), 0.0)),
-                             math.sqrt(self.v * self.v + a2 * (nxt - u0))), 0.5)
-            t += 2.0 * (nxt - u) / (max(v, 0.5) + v_next)
-            u, v, i = nxt, v_next, i + 1
+        u0 = self.u
+        end = min(u0 + dist, ps[-1])
+        t, v = 0.0, self.v
+        if u0 < end - 1e-9:
+            i0, vn, tcum = self._plan_times()
+            m = bisect.bisect_left(ps, end) - i0  # samples passed on the way
+            u = u0
+            if m > 0:
+                t, u, v = tcum[m - 1], ps[i0 + m - 1], vn[m - 1]
+            if u < end - 1e-9:
+                a2 = 2.0 * self.sc.trajectory.a_max
+                v_next = max(min(math.sqrt(max(_interp(end, ps, pv2), 0.0)),
+                                 math.sqrt(self.v * self.v + a2 * (end - u0))), 0.5)
+                t += 2.0 * (end - u) / (max(v, 0.5) + v_next)
+                v = v_next
         # beyond the plan's end: at the last speed
         return t + max(dist - (end - u0), 0.0) / max(v, 0.5)
+
+    def _plan_times(self) -> tuple[int, list[float], list[float]]:
+        """From the ego's station on: the first sample ahead, and at each sample from it
+        the speed [m/s] (the plan's, capped by accelerating from the ego's speed, at least
+        0.5) and the time [s] to reach it; kept for the step."""
+        key = (self.u, self.v)
+        if self._times_key == key:
+            return self._times
+        ps, _, _, _, pv2 = self._pl
+        s_np, pv2_np = self._pl_np
+        u0 = self.u
+        i0 = bisect.bisect_right(ps, u0)
+        s = s_np[i0:]
+        vp = np.sqrt(np.maximum(pv2_np[i0:], 0.0))
+        if len(vp) and i0 <= len(ps) - 1:  # the last sample as _interp has it
+            vp[-1] = math.sqrt(max(_interp(ps[-1], ps, pv2), 0.0))
+        a2 = 2.0 * self.sc.trajectory.a_max
+        vn = np.maximum(np.minimum(vp, np.sqrt(self.v * self.v + a2 * (s - u0))), 0.5)
+        prev_v = np.concatenate(([max(self.v, 0.5)], vn[:-1]))
+        prev_s = np.concatenate(([u0], s[:-1]))
+        tcum = np.cumsum(2.0 * (s - prev_s) / (prev_v + vn))
+        self._times_key = key
+        self._times = (i0, vn.tolist(), tcum.tolist())
+        return self._times
 
 
 def _lane_index(lane_id: str) -> int:

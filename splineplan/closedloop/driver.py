@@ -10,6 +10,7 @@ Its perception, replanning and control are the mixins of :mod:`.perception`,
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from collections.abc import Mapping
@@ -119,6 +120,8 @@ class Driver(Replanning, Control):
         self._beside_at: tuple[float, float] | None = None
         self._cand_at: tuple[float, float] | None = None
         self._lane_of: tuple[str, int] = ("", 0)  # the last lane's id and index
+        self._times_key: tuple[float, float] | None = None  # see Control._plan_times
+        self._times: tuple[int, list[float], list[float]] = (0, [], [])
         self._ahead_box: tuple[list[float], ...] = ([], [], [], [])
         self._sample_step = 0.0
         self._cand_was: list[int] = []
@@ -168,8 +171,12 @@ class Driver(Replanning, Control):
         self.route_length = route.length
 
     def set_road(self, road: RoadCheck, polygons: Obstacles) -> None:
-        """The road check (lanes and junction areas) and the obstacle polygons."""
-        self.road = road
+        """The road check (lanes and junction areas) and the obstacle polygons.
+
+        The vehicle gets its own copy of the check, sharing the lanes: the check keeps the
+        lane segments around where it last looked, and one check for vehicles all over the
+        network would gather them again for each."""
+        self.road = copy.copy(road)
         self.polygons = polygons
 
     def goal_arrival_pos(self) -> float:

@@ -424,6 +424,8 @@ class Replanning(Perception):
         self._sample_step = (float(np.hypot(np.diff(fx), np.diff(fy)).max()) * (1.0 + 1e-9)
                              if len(fx) > 1 else 0.0)
         # plain lists for the per-step interpolation along the path
+        self._pl_np = (u, self.path_speed**2)
+        self._times_key = None
         self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
                     self.path_heading.tolist(), (self.path_speed**2).tolist())
         self._full = (self.full_s.tolist(), self.full_xy[:, 0].tolist(),
