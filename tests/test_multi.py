@@ -11,6 +11,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import libsumo
+import numpy as np
 import pytest
 import sumolib
 from conftest import NETS, ROOT
@@ -296,3 +297,28 @@ def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
     assert lanes[-1] == "A1B1_0" and float(d["speed"][-1]) < 0.1
     assert r.vehicles["p"].metrics["stuck"] == [] or all(
         "junction clear" in s["why"] for s in r.vehicles["p"].metrics["stuck"])
+
+
+def test_plan_keeps_clear_of_others_plans() -> None:
+    """The check that spares a replan when others publish new plans: a plan through a
+    crossing keeps clear of one that crosses 5 s later, not of one that crosses at the
+    same time, nor of one that comes after it has stopped where the other passes (a plan
+    stays at its end)."""
+    from splineplan.closedloop.cooperate import keeps_clear_of
+    from splineplan.spacetime import MovingObstacle
+
+    t = np.arange(0.0, 10.01, 0.5)
+    east = MovingObstacle("a", t, np.column_stack((-20.0 + 4.0 * t, 0.0 * t)),
+                          0.0 * t, 4.5, 1.8)  # through (0, 0) at t = 5 s
+
+    def north(delay: float) -> MovingObstacle:
+        return MovingObstacle("b", t, np.column_stack((0.0 * t, -20.0 + 4.0 * (t - delay))),
+                              np.full(len(t), np.pi / 2), 4.5, 1.8)
+    assert not keeps_clear_of(east, [north(0.0)], 0.0, margin=0.3)
+    assert keeps_clear_of(east, [north(5.0)], 0.0, margin=0.3)
+    assert keeps_clear_of(east, [north(-5.0)], 0.0, margin=0.3)
+    stop = MovingObstacle("a", t[:9], np.column_stack((-20.0 + 2.5 * t[:9], 0.0 * t[:9])),
+                          0.0 * t[:9], 4.5, 1.8)  # stops at x = -10 m at t = 4 s
+    late = MovingObstacle("b", t, np.column_stack((-10.0 + 0.0 * t, -40.0 + 4.0 * t)),
+                          np.full(len(t), np.pi / 2), 4.5, 1.8)  # at (-10, 0) at t = 10 s
+    assert not keeps_clear_of(stop, [late], 0.0, margin=0.3)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from splineplan.geometry import FloatArray
-from splineplan.spacetime import MovingObstacle
+from splineplan.spacetime import MovingObstacle, box_gap
 
 #: Seconds between replans while a vehicle waits for another's published plan.
 WAIT_REPLAN = 1.0
@@ -28,6 +28,9 @@ WAIT_REPLAN = 1.0
 NEAR = 10.0
 #: A plan meeting the path at more than this angle [rad] crosses it (or comes the other way).
 CROSSING = math.radians(30.0)
+#: Time step [s] and horizon [s] of the check of a plan against others' new plans.
+CHECK_STEP = 0.2
+CHECK_HORIZON = 15.0
 
 
 @dataclass(frozen=True)
@@ -94,3 +97,32 @@ def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray) -> bool:
         return False
     diff = np.abs(np.angle(np.exp(1j * (plan.heading[near_plan] - heading[near_path]))))
     return bool(np.any(diff > CROSSING))
+
+
+def keeps_clear_of(mine: MovingObstacle, others: list[MovingObstacle], t0: float, *,
+                   margin: float) -> bool:
+    """Whether the plan ``mine`` keeps ``margin`` [m] from each of ``others`` at every
+    :data:`CHECK_STEP` from ``t0`` [s] while both are on the road, up to
+    :data:`CHECK_HORIZON` (``mine`` stays at its last pose after its end: the vehicle
+    stands there until it plans again).
+
+    A vehicle whose plan keeps clear of others' new plans need not plan again among them.
+    """
+    stay = MovingObstacle(mine.id, mine.t, mine.xy, mine.heading, mine.length, mine.width,
+                          stays=True)
+    for p in others:
+        t_end = p.t[-1] if not p.stays else max(p.t[-1], mine.t[-1])
+        t1 = min(max(t_end, t0), t0 + CHECK_HORIZON)
+        tt = np.arange(max(t0, p.t[0]), t1 + CHECK_STEP / 2.0, CHECK_STEP)
+        if not len(tt):
+            continue
+        xy1, h1, in1 = stay.at(tt)
+        xy2, h2, in2 = p.at(tt)
+        both = in1 & in2
+        if not both.any():
+            continue
+        gap = box_gap(xy1[both], h1[both], (stay.length, stay.width), xy2[both], h2[both],
+                      (p.length, p.width))
+        if float(gap.min()) < margin:
+            return False
+    return True

@@ -109,6 +109,7 @@ class Driver(Replanning, Control):
         self.keep_lane = False  # plan within its lane first (among SUMO's traffic)
         self.keep_clear = False  # stop before a junction it could not leave
         self.published_plan: Any = None
+        self.own_plan: Any = None  # its latest published plan (kept)
         self.waiting_for: tuple[str, ...] = ()
         self.trusted: dict[str, Any] = {}
         self.board_seen = 0

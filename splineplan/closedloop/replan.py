@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from splineplan.closedloop.cooperate import WAIT_REPLAN, plans_before
+from splineplan.closedloop.cooperate import WAIT_REPLAN, keeps_clear_of, plans_before
 from splineplan.closedloop.lanes import lane_band
 from splineplan.closedloop.perception import Perception
 from splineplan.corridor import Corridor
@@ -26,7 +26,7 @@ from splineplan.errors import (
 )
 from splineplan.geometry import FloatArray
 from splineplan.obstacles import Obstacles
-from splineplan.spacetime import published
+from splineplan.spacetime import MovingObstacle, published
 from splineplan.traffic import probe_points
 
 log = logging.getLogger(__name__)
@@ -151,10 +151,13 @@ class Replanning(Perception):
                 news = self._new_plans_near()
                 if news:
                     self.wait_replan_at = self.time + WAIT_REPLAN
-                    self._replan("cooperation", "new plan of " + ", ".join(
-                        f"'{v}'" for v in news) + " near the path",
-                                 obstacles=self._obstacles_ahead(ahead))
-                    return
+                    if self.waiting_for or not self._clear_of(news):
+                        self._replan("cooperation", "new plan of " + ", ".join(
+                            f"'{v.id}'" for v in news) + " near the path",
+                                     obstacles=self._obstacles_ahead(ahead))
+                        return
+                    # its plan keeps clear of theirs: seen, nothing to plan again
+                    self.board_seen = max(p.seq for p in self.board.values())
             if self.time >= self.traffic_after:
                 near = self._traffic_conflict()
                 if near is not None:
@@ -313,6 +316,9 @@ class Replanning(Perception):
         if self.publish and hasattr(traj, "t"):
             self.published_plan = published(traj, id=self.ego, t0=self.time,
                                             length=ego.length, width=ego.width)
+            self.own_plan = self.published_plan
+        else:
+            self.own_plan = None
         return True, None
 
     def _lane_width(self) -> float | None:
@@ -325,14 +331,24 @@ class Replanning(Perception):
             return None
         return float(min(ln.width for ln in lanes)) if lanes else None
 
-    def _new_plans_near(self) -> list[str]:
-        """Vehicles before this one that published a plan near the current path since this
-        one planned (it plans again among them)."""
+    def _new_plans_near(self) -> list[MovingObstacle]:
+        """The plans, published since this vehicle planned, of the vehicles before it that
+        come near its current path (grown where they cross it, as it plans among them), by
+        vehicle id."""
         if not len(self.path_xy):
             return []
         plans = plans_before(self.board, self.ego, self.priority, self.path_xy,
-                             self.path_heading, self.time, after=self.board_seen)
-        return sorted(p.id for p in plans)
+                             self.path_heading, self.time, pad=self.sc.sim.min_gap,
+                             after=self.board_seen)
+        return sorted(plans, key=lambda p: p.id)
+
+    def _clear_of(self, plans: list[MovingObstacle]) -> bool:
+        """Whether this vehicle's own latest plan keeps the safety margin from ``plans``
+        (:func:`.cooperate.keeps_clear_of`); ``False`` where it has none."""
+        mine = self.own_plan
+        if mine is None:
+            return False
+        return keeps_clear_of(mine, plans, self.time, margin=self.sc.roadmap.safety_margin)
 
     def _among_plans(self, traj: Any, roadmaps: Any, window: Any, everything: Obstacles,
                      final: bool) -> tuple[Any, Any, Obstacles]:
