@@ -79,3 +79,32 @@ def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: f
         return window
     return replace(window, keep_left=np.minimum(new_hi, UNBOUNDED),
                    keep_right=np.maximum(new_lo, -UNBOUNDED))
+
+
+#: How far [m] a vehicle's centre outside the corridor may be moved back onto it to plan
+#: from there, and how far [m] inside the boundary it is put.
+ONTO_ROAD = 0.5
+ONTO_INSET = 0.05
+
+
+def onto_road(window: Corridor, xy: tuple[float, float]) -> tuple[float, float] | None:
+    """A start for level 2 on ``window`` near the vehicle's centre ``xy`` [m] that lies
+    outside its boundaries: the point at the same station, :data:`ONTO_INSET` inside the
+    nearer boundary, if within :data:`ONTO_ROAD` of ``xy``; ``None`` otherwise (also where
+    ``xy`` is inside).
+
+    A vehicle that drifted out of the corridor (a crawl through a tight turn) could
+    otherwise plan no more and stand there for good; SUMO puts it on the new start at the
+    next step.
+    """
+    s, lat = (float(v) for v in window.to_sl(np.asarray([xy], dtype=float))[0])
+    if not 0.0 <= s <= window.length:
+        return None
+    right, left = (float(v) for v in window.bounds_at(s))
+    if right <= lat <= left or left - right <= 2.0 * ONTO_INSET:
+        return None
+    new = min(max(lat, right + ONTO_INSET), left - ONTO_INSET)
+    if abs(new - lat) > ONTO_ROAD:
+        return None
+    x, y = (float(v) for v in window.to_xy(np.array([s]), np.array([new]))[0])
+    return x, y

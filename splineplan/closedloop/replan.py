@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from splineplan.closedloop.cooperate import WAIT_REPLAN, keeps_clear_of, plans_before
-from splineplan.closedloop.lanes import lane_band
+from splineplan.closedloop.lanes import lane_band, onto_road
 from splineplan.closedloop.perception import Perception
 from splineplan.corridor import Corridor
 from splineplan.errors import (
@@ -271,6 +271,12 @@ class Replanning(Perception):
                                                   f"'{self._edge_at(self.station)}'")
                 window = lane_band(window, self.station - s0, self.lateral,
                                    lane_width=width, half_width=ego.width / 2.0)
+            start = onto_road(window, (float(self.pose[0]), float(self.pose[1])))
+            if start is not None:
+                log.info("t=%.1f '%s' is off its corridor: planning from %.2f m away, on "
+                         "it", self.time, self.ego, math.hypot(start[0] - self.pose[0],
+                                                               start[1] - self.pose[1]))
+                self.pose = np.array([start[0], start[1], self.pose[2]])
             roadmaps, traj = plan_corridor(
                 window, everything, self.pose[:2], float(self.pose[2]),
                 roadmap_params=sc.roadmap, params=sc.trajectory,
