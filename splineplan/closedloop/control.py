@@ -188,8 +188,11 @@ class Control(Perception):
         vehicle would come to stand inside the next junction on its route (its front at
         ``stop_front``, a station on its path, behind a vehicle that stands beyond), it
         stops :data:`YIELD_STOP` before the junction instead, if it still can at its
-        emergency braking; once inside, it goes on."""
+        emergency braking; once inside (by the route's stations or on SUMO's junction
+        lanes), it goes on."""
         ego, b = self.sc.ego, self.sc.trajectory.b_max
+        if self.last_lane.startswith(":"):
+            return math.inf  # SUMO has it in a junction already
         front = self.station + ego.length / 2.0
         stop = self.station + (stop_front - self.u)  # on the route
         for j_in, j_out in self._junction_spans:
