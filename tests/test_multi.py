@@ -322,3 +322,18 @@ def test_plan_keeps_clear_of_others_plans() -> None:
     late = MovingObstacle("b", t, np.column_stack((-10.0 + 0.0 * t, -40.0 + 4.0 * t)),
                           np.full(len(t), np.pi / 2), 4.5, 1.8)  # at (-10, 0) at t = 10 s
     assert not keeps_clear_of(stop, [late], 0.0, margin=0.3)
+
+
+def test_waiting_vehicle_plans_again_when_its_plan_moves_on() -> None:
+    """A vehicle that waits for another's plan plans again from shortly before its own
+    plan has it move on (the time of the first sample half a metre on), not every second
+    before then."""
+    from types import SimpleNamespace
+
+    from splineplan.closedloop.replan import _go_time
+
+    waits = SimpleNamespace(t=np.array([0.0, 1.0, 6.0, 7.0, np.inf]),
+                            s=np.array([0.0, 0.2, 0.4, 2.0, 3.0]))
+    assert _go_time(waits, 100.0) == 107.0
+    assert _go_time(SimpleNamespace(t=np.array([0.0, 0.5]), s=np.array([0.0, 0.3])),
+                    100.0) == 100.0

@@ -77,6 +77,7 @@ class DriverState:
     keep_clear: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
     own_plan: Any  # the same, kept after the run took it to the board
+    go_at: float
     waiting_for: tuple[str, ...]
     board_seen: int  # the board's count of plans when this one last planned
     trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among

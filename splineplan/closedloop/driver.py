@@ -114,6 +114,7 @@ class Driver(Replanning, Control):
         self.trusted: dict[str, Any] = {}
         self.board_seen = 0
         self.wait_replan_at = 0.0
+        self.go_at = 0.0  # when its plan has it move on, while it waits [s]
         self.conflicts: list[dict[str, Any]] = []
         self.why_slow = ""  # what holds the vehicle back (speed control), in words
         self.stand_since: float | None = None

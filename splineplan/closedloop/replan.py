@@ -41,6 +41,12 @@ _PATH_SPACING = 0.5
 _PATH_EXTENSION = 60.0
 #: At most one ``traffic`` replan per this many seconds.
 _TRAFFIC_REPLAN_EVERY = 0.5
+#: While waiting for others' plans, a vehicle plans again (every ``WAIT_REPLAN``) from this
+#: long [s] before its plan has it move on, not before: the plan's speed profile holds it
+#: until then, and plans in between come out the same.
+GO_EARLY = 0.5
+#: A plan has the vehicle move on once it has gone this far [m].
+_GO_MOVED = 0.5
 #: Period [s] of the checks for new obstacles ahead and for traffic beside the ego coming
 #: near the plan (a reaction time well below a driver's; the deviation and horizon checks,
 #: and the ego's own safety checks, run every step).
@@ -165,7 +171,8 @@ class Replanning(Perception):
                     self._replan("traffic", f"vehicle '{near}' beside the ego comes near the "
                                             "planned path", obstacles=self._obstacles_ahead(ahead))
                     return
-        if self.waiting_for and self.time >= self.wait_replan_at:
+        if (self.waiting_for and self.time >= self.wait_replan_at
+                and self.time >= self.go_at - GO_EARLY):
             self.wait_replan_at = self.time + WAIT_REPLAN
             self._replan("cooperation", "waiting for the plan of "
                          + ", ".join(f"'{v}'" for v in self.waiting_for),
@@ -405,6 +412,7 @@ class Replanning(Perception):
                     timed, sp, roadmaps = timed2, sp2, roadmaps2
                     everything = everything + static
         self.waiting_for = sp.yielded
+        self.go_at = _go_time(timed, self.time) if sp.yielded else self.time
         # the plans grown by the standstill distance where they cross (cooperate.py): the
         # control trusts them for vehicles that keep to them
         self.trusted = {p.id: p for p in plans}
@@ -504,3 +512,14 @@ class Replanning(Perception):
         # station on the route -> on the trajectory: offset by where the ego is on both
         margin = self.sc.ego.length + 2.0 * self.sc.roadmap.d + 2.0
         self.stop_at = max(self.u + (st - self.station) - margin, self.u)
+
+
+def _go_time(traj: Any, now: float) -> float:
+    """When [s] a plan made at ``now`` [s] has the vehicle move on: the time of its first
+    sample :data:`_GO_MOVED` beyond its start (``now`` where it has none)."""
+    tt = np.asarray(getattr(traj, "t", ()), dtype=float)
+    if not len(tt):
+        return now
+    s = np.asarray(traj.s, dtype=float)
+    moved = np.flatnonzero((s > s[0] + _GO_MOVED) & np.isfinite(tt))
+    return now + float(tt[moved[0]]) if len(moved) else now
