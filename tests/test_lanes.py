@@ -25,9 +25,10 @@ def test_lane_band_keeps_the_footprint_in_the_lane_it_is_in() -> None:
         assert np.allclose(k_lo, lo + 0.9) and np.allclose(k_hi, hi - 0.9)
 
 
-def test_lane_band_gives_way_to_the_lanes_the_route_needs() -> None:
+def test_lane_band_changes_to_the_lane_the_route_needs() -> None:
     """Where the corridor's own keep offsets (before a junction) ask for the other lane,
-    the band holds only until some way before and the corridor's offsets hold there."""
+    the band moves to that lane some way before, whole: the vehicle changes lanes there
+    rather than drift across both."""
     c = _street()
     s = c.s
     keep_lo = np.where(s >= 70.0, 0.5, -1e9)
@@ -36,8 +37,8 @@ def test_lane_band_gives_way_to_the_lanes_the_route_needs() -> None:
     band = lane_band(c, 5.0, -1.6, lane_width=3.2, half_width=0.9)
     lo, hi = band.keep_at(np.array([10.0, 60.0, 80.0]))
     assert np.isclose(lo[0], -2.3) and np.isclose(hi[0], -0.9)  # its lane
-    assert hi[1] > 1.0  # free to change lanes before the junction
-    assert np.isclose(lo[2], 0.5)  # the lane that leads on
+    assert np.isclose(lo[1], 0.9) and np.isclose(hi[1], 2.3)  # the lane that leads on
+    assert np.isclose(lo[2], 0.9) and np.isclose(hi[2], 2.3)
 
 
 def test_onto_road_moves_a_start_just_outside_back_in() -> None:

@@ -20,8 +20,8 @@ import numpy as np
 
 from splineplan.corridor import UNBOUNDED, Corridor
 
-#: Stations [m] before a needed change of lane from which the band no longer holds (the
-#: room for the change).
+#: Stations [m] before a needed change of lane from which the band holds the lane the
+#: route needs (the room for the change).
 CHANGE_ROOM = 30.0
 #: Least half width [m] of the band for the centre.
 MIN_SLACK = 0.2
@@ -44,8 +44,10 @@ def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: f
         Half the vehicle's width [m]: the centre keeps ``lane_width / 2 - half_width``
         (at least :data:`MIN_SLACK`) from the lane's centre line.
 
-    Junction stretches keep the window's own keep offsets; so do the stations from
-    :data:`CHANGE_ROOM` before the first where the lane of the band does not lead on.
+    Junction stretches keep the window's own keep offsets. From :data:`CHANGE_ROOM`
+    before the first station where the lane of the band does not lead on (the window's
+    keep offsets before a junction), the band holds the lane that does: the vehicle
+    changes lanes there rather than drift across both.
     """
     if lane_width <= 0.0:
         return window
@@ -72,7 +74,20 @@ def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: f
     new_lo, new_hi = np.maximum(k_lo, b_lo), np.minimum(k_hi, b_hi)
     apart = band & (new_lo > new_hi)  # the route needs another lane here
     if apart.any():
-        band &= s < float(s[np.argmax(apart)]) - CHANGE_ROOM
+        # from CHANGE_ROOM before, the lane the route needs (where the window's keep
+        # offsets leave room for one): change lanes there, not stand across two
+        first = int(np.argmax(apart))
+        mid = 0.5 * (max(float(k_lo[first]), float(right[first]))
+                     + min(float(k_hi[first]), float(left[first])))
+        target = np.clip(math.floor((mid - float(right[first])) / lane_width), 0,
+                         lanes - 1.0)
+        change = band & (s >= float(s[first]) - CHANGE_ROOM)
+        t_centre = right + (target + 0.5) * lane_width
+        t_lo = np.maximum(k_lo, t_centre - slack)
+        t_hi = np.minimum(k_hi, t_centre + slack)
+        new_lo = np.where(change, t_lo, new_lo)
+        new_hi = np.where(change, t_hi, new_hi)
+        band &= new_lo <= new_hi
     new_lo = np.where(band, new_lo, k_lo)
     new_hi = np.where(band, new_hi, k_hi)
     if not band.any():
