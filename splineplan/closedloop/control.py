@@ -15,7 +15,7 @@ import numpy as np
 from splineplan.closedloop.cooperate import CROSSING
 from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.sumo.world import Signals
-from splineplan.traffic import first_in_reach, next_in_circle, probe_points, safe_speed
+from splineplan.traffic import first_in_reach, probe_points, safe_speed
 
 #: A planned vehicle within this distance [m] of where its published plan puts it keeps to
 #: its plan.
@@ -117,8 +117,9 @@ class Control(Perception):
         ahead of the ego (the trajectory and its straight extension); the gap is to the first
         such sample. Only the samples within the vehicle's bounding circle plus that reach
         can be in reach: a vehicle whose circle misses the bounding box of the samples
-        ahead is skipped, and the samples in the circle are found by a walk along the path
-        that skips those the distance bound rules out (:func:`~splineplan.traffic.next_in_circle`).
+        ahead is skipped, and the first sample in each other one's circle is found for all
+        of them at once (arrays); the samples after it, by
+        :func:`~splineplan.traffic.first_in_reach`.
         """
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
         sim = sc.sim
@@ -133,15 +134,22 @@ class Control(Perception):
             cand = []  # (first sample in the circle, vehicle, centre x, y, circle's radius)
             if i0 < len(full_s):
                 x0, x1, y0, y1 = (b[i0] for b in self._ahead_box)
-                step = self._sample_step
-                for j, (cx, cy, r) in enumerate(zip(o.cx.tolist(), o.cy.tolist(),
-                                                    o.radius.tolist(), strict=True)):
-                    r += reach
-                    if cx + r < x0 or cx - r > x1 or cy + r < y0 or cy - r > y1:
-                        continue
-                    lo = next_in_circle(full_x, full_y, i0, cx, cy, r, step)
-                    if lo >= 0:
-                        cand.append((lo, j, cx, cy, r))
+                ocx, ocy = o.cx, o.cy
+                orad = o.radius + reach
+                near = np.flatnonzero(~((ocx + orad < x0) | (ocx - orad > x1)
+                                        | (ocy + orad < y0) | (ocy - orad > y1)))
+                if len(near):
+                    # the first sample ahead in each one's circle, all at once
+                    dx = self.full_xy[i0:, 0][None, :] - ocx[near, None]
+                    dy = self.full_xy[i0:, 1][None, :] - ocy[near, None]
+                    r = orad[near]
+                    inside = dx * dx + dy * dy <= (r * r)[:, None]
+                    hit = inside.any(axis=1)
+                    first = inside.argmax(axis=1)
+                    for k in np.flatnonzero(hit).tolist():
+                        j = int(near[k])
+                        cand.append((i0 + int(first[k]), j, float(ocx[j]), float(ocy[j]),
+                                     float(r[k])))
             cand.sort()
             reach2 = reach * reach
             base = self.u + ego.length / 2.0 + sim.min_gap

@@ -82,20 +82,30 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
         inside = np.all((p.xy >= lo) & (p.xy <= hi), axis=1)
         if not inside.any():
             continue
-        if pad > 0.0 and _crosses(p, xy, heading):
+        if pad > 0.0 and _crosses(p, xy, heading, inside, (b_lo, b_hi)):
             p = replace(p, length=p.length + 2.0 * pad, width=p.width + 2.0 * pad)
         out.append(p)
     return out
 
 
-def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray) -> bool:
+def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray,
+             inside: np.ndarray, box: tuple[FloatArray, FloatArray]) -> bool:
     """Whether a plan meets the path (within :data:`NEAR`) at more than :data:`CROSSING`
-    from the path's heading."""
-    d = np.hypot(plan.xy[:, None, 0] - xy[None, :, 0], plan.xy[:, None, 1] - xy[None, :, 1])
+    from the path's heading.
+
+    Only the plan's points ``inside`` the path's bounding box grown by :data:`NEAR`, and
+    the path's points inside the plan's bounding ``box`` grown by it, can meet."""
+    lo, hi = box[0] - NEAR, box[1] + NEAR
+    mine = np.flatnonzero(np.all((xy >= lo) & (xy <= hi), axis=1))
+    theirs = np.flatnonzero(inside)
+    if not len(mine) or not len(theirs):
+        return False
+    pxy, pxy_h = plan.xy[theirs], plan.heading[theirs]
+    d = np.hypot(pxy[:, None, 0] - xy[None, mine, 0], pxy[:, None, 1] - xy[None, mine, 1])
     near_plan, near_path = np.nonzero(d < NEAR)
     if not len(near_plan):
         return False
-    diff = np.abs(np.angle(np.exp(1j * (plan.heading[near_plan] - heading[near_path]))))
+    diff = np.abs(np.angle(np.exp(1j * (pxy_h[near_plan] - heading[mine][near_path]))))
     return bool(np.any(diff > CROSSING))
 
 
@@ -119,6 +129,9 @@ def keeps_clear_of(mine: MovingObstacle, others: list[MovingObstacle], t0: float
         xy1, h1, in1 = stay.at(tt)
         xy2, h2, in2 = p.at(tt)
         both = in1 & in2
+        # only where the bounding circles come within the margin can the boxes
+        reach = 0.5 * (math.hypot(stay.length, stay.width) + math.hypot(p.length, p.width))
+        both &= np.hypot(xy1[:, 0] - xy2[:, 0], xy1[:, 1] - xy2[:, 1]) < reach + margin
         if not both.any():
             continue
         gap = box_gap(xy1[both], h1[both], (stay.length, stay.width), xy2[both], h2[both],
