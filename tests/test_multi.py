@@ -11,6 +11,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import libsumo
+import numpy as np
 import pytest
 import sumolib
 from conftest import NETS, ROOT
@@ -239,3 +240,100 @@ def test_ego_tables_default_ids_and_dimensions(tmp_path: Path) -> None:
     second = sc.for_vehicle(sc.egos[1])
     assert second.roadmap.vehicle_length == 6.0 and second.trajectory.s_max == 10.0
     assert sc.for_vehicle(sc.egos[2]).trajectory.s_max == sc.trajectory.s_max
+
+
+def test_planned_vehicle_keeps_to_its_lane_among_sumo_traffic(tmp_path: Path) -> None:
+    """On a street of two lanes one way, a planned vehicle among SUMO's cars drives within
+    one lane (SUMO has it on one lane only, and the drivers of the other lane do not see
+    a part of it that reaches into theirs), so that SUMO's cars passing it in the other
+    lane never touch it."""
+    rou = tmp_path / "r.rou.xml"
+    cars = "\n".join(
+        f'<vehicle id="c{k}" depart="{2.0 * k:g}" departLane="1" departPos="5" '
+        f'departSpeed="max" type="car"><route edges="A1B1 B1C1 C1D1"/></vehicle>'
+        for k in range(1, 6))
+    rou.write_text(f"""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger" lcStrategic="-1"
+       lcSpeedGain="0" lcKeepRight="0"/>
+<vehicle id="p" depart="0" departLane="0" departPos="20" type="car">
+  <route edges="A1B1 B1C1 C1D1"/></vehicle>
+{cars}
+</routes>""")
+    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=45.0)
+    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    d = r.vehicles["p"].driven
+    # the corridor of a street spans both lanes, its reference the line between them:
+    # within a lane, the centre keeps half the car's width from that line
+    half = sc.ego.width / 2.0
+    on_street = [abs(float(lat)) for lat, lane, st in zip(d["lateral"], d["lane"],
+                                                          d["station"], strict=True)
+                 if not str(lane).startswith(":") and st > 25.0]
+    assert len(on_street) > 100
+    assert min(on_street) >= half - 0.05
+    assert r.metrics["pairs"]["collision_pairs_planned"] == []
+    assert r.vehicles["p"].metrics["time_off_road"] == 0.0
+
+
+
+def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
+    """A car crawls just beyond a junction: a planned vehicle coming up behind it stops
+    before the junction, as SUMO's drivers do, rather than in it, where it would stand in
+    the way of the crossing traffic; it never enters the junction while there is no room
+    behind that car."""
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text("""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vType id="crawl" length="4.5" width="1.8" vClass="passenger" maxSpeed="0.05"/>
+<vehicle id="q" depart="0" departLane="0" departPos="7" departSpeed="0" type="crawl">
+  <route edges="B1C1 C1D1"/></vehicle>
+<vehicle id="p" depart="0" departLane="0" departPos="60" type="car">
+  <route edges="A1B1 B1C1 C1D1"/></vehicle>
+</routes>""")
+    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=25.0)
+    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    d = r.vehicles["p"].driven
+    lanes = [str(lane) for lane in d["lane"]]
+    assert not any(lane.startswith(":B1") for lane in lanes)
+    assert lanes[-1] == "A1B1_0" and float(d["speed"][-1]) < 0.1
+    assert r.vehicles["p"].metrics["stuck"] == [] or all(
+        "junction clear" in s["why"] for s in r.vehicles["p"].metrics["stuck"])
+
+
+def test_plan_keeps_clear_of_others_plans() -> None:
+    """The check that spares a replan when others publish new plans: a plan through a
+    crossing keeps clear of one that crosses 5 s later, not of one that crosses at the
+    same time, nor of one that comes after it has stopped where the other passes (a plan
+    stays at its end)."""
+    from splineplan.closedloop.cooperate import keeps_clear_of
+    from splineplan.spacetime import MovingObstacle
+
+    t = np.arange(0.0, 10.01, 0.5)
+    east = MovingObstacle("a", t, np.column_stack((-20.0 + 4.0 * t, 0.0 * t)),
+                          0.0 * t, 4.5, 1.8)  # through (0, 0) at t = 5 s
+
+    def north(delay: float) -> MovingObstacle:
+        return MovingObstacle("b", t, np.column_stack((0.0 * t, -20.0 + 4.0 * (t - delay))),
+                              np.full(len(t), np.pi / 2), 4.5, 1.8)
+    assert not keeps_clear_of(east, [north(0.0)], 0.0, margin=0.3)
+    assert keeps_clear_of(east, [north(5.0)], 0.0, margin=0.3)
+    assert keeps_clear_of(east, [north(-5.0)], 0.0, margin=0.3)
+    stop = MovingObstacle("a", t[:9], np.column_stack((-20.0 + 2.5 * t[:9], 0.0 * t[:9])),
+                          0.0 * t[:9], 4.5, 1.8)  # stops at x = -10 m at t = 4 s
+    late = MovingObstacle("b", t, np.column_stack((-10.0 + 0.0 * t, -40.0 + 4.0 * t)),
+                          np.full(len(t), np.pi / 2), 4.5, 1.8)  # at (-10, 0) at t = 10 s
+    assert not keeps_clear_of(stop, [late], 0.0, margin=0.3)
+
+
+def test_waiting_vehicle_plans_again_when_its_plan_moves_on() -> None:
+    """A vehicle that waits for another's plan plans again from shortly before its own
+    plan has it move on (the time of the first sample half a metre on), not every second
+    before then."""
+    from types import SimpleNamespace
+
+    from splineplan.closedloop.replan import _go_time
+
+    waits = SimpleNamespace(t=np.array([0.0, 1.0, 6.0, 7.0, np.inf]),
+                            s=np.array([0.0, 0.2, 0.4, 2.0, 3.0]))
+    assert _go_time(waits, 100.0) == 107.0
+    assert _go_time(SimpleNamespace(t=np.array([0.0, 0.5]), s=np.array([0.0, 0.3])),
+                    100.0) == 100.0

@@ -73,7 +73,11 @@ class DriverState:
     priority: int
     publish: bool
     keep_plans: bool
+    keep_lane: bool
+    keep_clear: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
+    own_plan: Any  # the same, kept after the run took it to the board
+    go_at: float
     waiting_for: tuple[str, ...]
     board_seen: int  # the board's count of plans when this one last planned
     trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among
@@ -83,6 +87,9 @@ class DriverState:
     signals: Signals
     _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
     _pl: tuple[list[float], ...]
+    _pl_np: tuple[FloatArray, FloatArray]
+    _times_key: tuple[float, float] | None
+    _times: tuple[int, list[float], list[float]]
     _full: tuple[list[float], ...]
     _ahead_box: tuple[list[float], ...]
     _sample_step: float
@@ -94,6 +101,7 @@ class DriverState:
     _ref_len: FloatArray
     _ref_heading: FloatArray
     _edge_starts: list[float]
+    _junction_spans: list[tuple[float, float]]
     _beside_at: tuple[float, float] | None
     _beside_was: tuple[np.ndarray, FloatArray]
     _cand_at: tuple[float, float] | None

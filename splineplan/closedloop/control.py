@@ -15,7 +15,7 @@ import numpy as np
 from splineplan.closedloop.cooperate import CROSSING
 from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.sumo.world import Signals
-from splineplan.traffic import first_in_reach, next_in_circle, probe_points, safe_speed
+from splineplan.traffic import first_in_reach, probe_points, safe_speed
 
 #: A planned vehicle within this distance [m] of where its published plan puts it keeps to
 #: its plan.
@@ -26,6 +26,9 @@ PATH_MARGIN = 0.15
 #: vehicle it must yield to; it stops this far [m] before the area to let that one pass.
 YIELD_GAP = 1.5
 YIELD_STOP = 1.0
+#: A vehicle in the path slower than this [m/s] stands in a queue: the ego keeps a junction
+#: clear rather than stand inside it behind that vehicle (``keep_clear``).
+QUEUE_SPEED = 1.0
 #: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
 STOPPED_FOE_SPEED = 0.1
 #: The closed loop's emergency deceleration, a multiple of the planner's ``b_max``: the
@@ -114,13 +117,15 @@ class Control(Perception):
         ahead of the ego (the trajectory and its straight extension); the gap is to the first
         such sample. Only the samples within the vehicle's bounding circle plus that reach
         can be in reach: a vehicle whose circle misses the bounding box of the samples
-        ahead is skipped, and the samples in the circle are found by a walk along the path
-        that skips those the distance bound rules out (:func:`~splineplan.traffic.next_in_circle`).
+        ahead is skipped, and the first sample in each other one's circle is found for all
+        of them at once (arrays); the samples after it, by
+        :func:`~splineplan.traffic.first_in_reach`.
         """
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
         sim = sc.sim
         cap = math.inf
         gap_to = -1  # the vehicle (in self.others) whose gap caps the speed
+        stop_front: float | None = None  # station on the path [m] the front stops at
         o = self.others
         reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
         if o.n:
@@ -129,15 +134,22 @@ class Control(Perception):
             cand = []  # (first sample in the circle, vehicle, centre x, y, circle's radius)
             if i0 < len(full_s):
                 x0, x1, y0, y1 = (b[i0] for b in self._ahead_box)
-                step = self._sample_step
-                for j, (cx, cy, r) in enumerate(zip(o.cx.tolist(), o.cy.tolist(),
-                                                    o.radius.tolist(), strict=True)):
-                    r += reach
-                    if cx + r < x0 or cx - r > x1 or cy + r < y0 or cy - r > y1:
-                        continue
-                    lo = next_in_circle(full_x, full_y, i0, cx, cy, r, step)
-                    if lo >= 0:
-                        cand.append((lo, j, cx, cy, r))
+                ocx, ocy = o.cx, o.cy
+                orad = o.radius + reach
+                near = np.flatnonzero(~((ocx + orad < x0) | (ocx - orad > x1)
+                                        | (ocy + orad < y0) | (ocy - orad > y1)))
+                if len(near):
+                    # the first sample ahead in each one's circle, all at once
+                    dx = self.full_xy[i0:, 0][None, :] - ocx[near, None]
+                    dy = self.full_xy[i0:, 1][None, :] - ocy[near, None]
+                    r = orad[near]
+                    inside = dx * dx + dy * dy <= (r * r)[:, None]
+                    hit = inside.any(axis=1)
+                    first = inside.argmax(axis=1)
+                    for k in np.flatnonzero(hit).tolist():
+                        j = int(near[k])
+                        cand.append((i0 + int(first[k]), j, float(ocx[j]), float(ocy[j]),
+                                     float(r[k])))
             cand.sort()
             reach2 = reach * reach
             base = self.u + ego.length / 2.0 + sim.min_gap
@@ -161,14 +173,46 @@ class Control(Perception):
                 c = safe_speed(gap, v_l, tp.b_max, sim.time_gap)
                 if c < cap:
                     cap, gap_to = c, j
+                    # where its front will stand behind a vehicle that (nearly) stands
+                    stop_front = (full_s[first] - sim.min_gap if v_l < QUEUE_SPEED
+                                  else None)
         if gap_to >= 0:
             self.why_slow = f"keeping its gap to vehicle '{o.ids[gap_to]}' ahead"
+            if self.keep_clear and stop_front is not None:
+                clear = self._keep_clear_speed(stop_front)
+                if clear < cap:
+                    cap = clear
+                    self.why_slow = (f"keeping the junction clear: vehicle "
+                                     f"'{o.ids[gap_to]}' stands beyond it")
         red, give = self._red_light_speed(), self._yield_speed()
         if red < cap:
             cap, self.why_slow = red, "stopping at a red light"
         if give < cap:
             cap = give  # (why_slow set by _yield_speed)
         return cap, int(math.isfinite(cap))
+
+    def _keep_clear_speed(self, stop_front: float) -> float:
+        """Speed cap [m/s] that keeps a junction clear, as SUMO's drivers do: where the
+        vehicle would come to stand inside the next junction on its route (its front at
+        ``stop_front``, a station on its path, behind a vehicle that stands beyond), it
+        stops :data:`YIELD_STOP` before the junction instead, if it still can at its
+        emergency braking; once inside (by the route's stations or on SUMO's junction
+        lanes), it goes on."""
+        ego, b = self.sc.ego, self.sc.trajectory.b_max
+        if self.last_lane.startswith(":"):
+            return math.inf  # SUMO has it in a junction already
+        front = self.station + ego.length / 2.0
+        stop = self.station + (stop_front - self.u)  # on the route
+        for j_in, j_out in self._junction_spans:
+            if j_in < front:
+                continue  # passed, or in it
+            if stop <= j_in or stop - ego.length >= j_out:
+                break  # stands before the junction, or behind it
+            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * (j_in - front):
+                break  # cannot stop before it
+            room = j_in - front - YIELD_STOP
+            return math.sqrt(max(2.0 * b * (room - self.v * self.dt), 0.0))
+        return math.inf
 
     def _keeps_to_plan(self, j: int, path_heading: float) -> bool:
         """Whether vehicle ``j`` (of ``self.others``), whose published plan the current
@@ -245,20 +289,52 @@ class Control(Perception):
 
     def _time_along_plan(self, dist: float) -> float:
         """Time [s] the ego takes to drive ``dist`` [m] along its plan from where it is,
-        at the plan's speeds but no faster than accelerating from its speed at ``a_max``."""
+        at the plan's speeds but no faster than accelerating from its speed at ``a_max``.
+
+        The times to the plan's samples ahead are summed once per step
+        (:meth:`_plan_times`), the same sums in the same order as a walk along them."""
         ps, _, _, _, pv2 = self._pl
-        a2 = 2.0 * self.sc.trajectory.a_max
-        u0, end = self.u, min(self.u + dist, ps[-1])
-        t, u, v = 0.0, u0, self.v
-        i = bisect.bisect_right(ps, u0)
-        while u < end - 1e-9:
-            nxt = min(ps[i], end) if i < len(ps) else end
-            v_next = max(min(math.sqrt(max(_interp(nxt, ps, pv2), 0.0)),
-                             math.sqrt(self.v * self.v + a2 * (nxt - u0))), 0.5)
-            t += 2.0 * (nxt - u) / (max(v, 0.5) + v_next)
-            u, v, i = nxt, v_next, i + 1
+        u0 = self.u
+        end = min(u0 + dist, ps[-1])
+        t, v = 0.0, self.v
+        if u0 < end - 1e-9:
+            i0, vn, tcum = self._plan_times()
+            m = bisect.bisect_left(ps, end) - i0  # samples passed on the way
+            u = u0
+            if m > 0:
+                t, u, v = tcum[m - 1], ps[i0 + m - 1], vn[m - 1]
+            if u < end - 1e-9:
+                a2 = 2.0 * self.sc.trajectory.a_max
+                v_next = max(min(math.sqrt(max(_interp(end, ps, pv2), 0.0)),
+                                 math.sqrt(self.v * self.v + a2 * (end - u0))), 0.5)
+                t += 2.0 * (end - u) / (max(v, 0.5) + v_next)
+                v = v_next
         # beyond the plan's end: at the last speed
         return t + max(dist - (end - u0), 0.0) / max(v, 0.5)
+
+    def _plan_times(self) -> tuple[int, list[float], list[float]]:
+        """From the ego's station on: the first sample ahead, and at each sample from it
+        the speed [m/s] (the plan's, capped by accelerating from the ego's speed, at least
+        0.5) and the time [s] to reach it; kept for the step."""
+        key = (self.u, self.v)
+        if self._times_key == key:
+            return self._times
+        ps, _, _, _, pv2 = self._pl
+        s_np, pv2_np = self._pl_np
+        u0 = self.u
+        i0 = bisect.bisect_right(ps, u0)
+        s = s_np[i0:]
+        vp = np.sqrt(np.maximum(pv2_np[i0:], 0.0))
+        if len(vp) and i0 <= len(ps) - 1:  # the last sample as _interp has it
+            vp[-1] = math.sqrt(max(_interp(ps[-1], ps, pv2), 0.0))
+        a2 = 2.0 * self.sc.trajectory.a_max
+        vn = np.maximum(np.minimum(vp, np.sqrt(self.v * self.v + a2 * (s - u0))), 0.5)
+        prev_v = np.concatenate(([max(self.v, 0.5)], vn[:-1]))
+        prev_s = np.concatenate(([u0], s[:-1]))
+        tcum = np.cumsum(2.0 * (s - prev_s) / (prev_v + vn))
+        self._times_key = key
+        self._times = (i0, vn.tolist(), tcum.tolist())
+        return self._times
 
 
 def _lane_index(lane_id: str) -> int:

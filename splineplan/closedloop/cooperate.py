@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from splineplan.geometry import FloatArray
-from splineplan.spacetime import MovingObstacle
+from splineplan.spacetime import MovingObstacle, box_gap
 
 #: Seconds between replans while a vehicle waits for another's published plan.
 WAIT_REPLAN = 1.0
@@ -28,6 +28,9 @@ WAIT_REPLAN = 1.0
 NEAR = 10.0
 #: A plan meeting the path at more than this angle [rad] crosses it (or comes the other way).
 CROSSING = math.radians(30.0)
+#: Time step [s] and horizon [s] of the check of a plan against others' new plans.
+CHECK_STEP = 0.2
+CHECK_HORIZON = 15.0
 
 
 @dataclass(frozen=True)
@@ -79,18 +82,60 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
         inside = np.all((p.xy >= lo) & (p.xy <= hi), axis=1)
         if not inside.any():
             continue
-        if pad > 0.0 and _crosses(p, xy, heading):
+        if pad > 0.0 and _crosses(p, xy, heading, inside, (b_lo, b_hi)):
             p = replace(p, length=p.length + 2.0 * pad, width=p.width + 2.0 * pad)
         out.append(p)
     return out
 
 
-def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray) -> bool:
+def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray,
+             inside: np.ndarray, box: tuple[FloatArray, FloatArray]) -> bool:
     """Whether a plan meets the path (within :data:`NEAR`) at more than :data:`CROSSING`
-    from the path's heading."""
-    d = np.hypot(plan.xy[:, None, 0] - xy[None, :, 0], plan.xy[:, None, 1] - xy[None, :, 1])
+    from the path's heading.
+
+    Only the plan's points ``inside`` the path's bounding box grown by :data:`NEAR`, and
+    the path's points inside the plan's bounding ``box`` grown by it, can meet."""
+    lo, hi = box[0] - NEAR, box[1] + NEAR
+    mine = np.flatnonzero(np.all((xy >= lo) & (xy <= hi), axis=1))
+    theirs = np.flatnonzero(inside)
+    if not len(mine) or not len(theirs):
+        return False
+    pxy, pxy_h = plan.xy[theirs], plan.heading[theirs]
+    d = np.hypot(pxy[:, None, 0] - xy[None, mine, 0], pxy[:, None, 1] - xy[None, mine, 1])
     near_plan, near_path = np.nonzero(d < NEAR)
     if not len(near_plan):
         return False
-    diff = np.abs(np.angle(np.exp(1j * (plan.heading[near_plan] - heading[near_path]))))
+    diff = np.abs(np.angle(np.exp(1j * (pxy_h[near_plan] - heading[mine][near_path]))))
     return bool(np.any(diff > CROSSING))
+
+
+def keeps_clear_of(mine: MovingObstacle, others: list[MovingObstacle], t0: float, *,
+                   margin: float) -> bool:
+    """Whether the plan ``mine`` keeps ``margin`` [m] from each of ``others`` at every
+    :data:`CHECK_STEP` from ``t0`` [s] while both are on the road, up to
+    :data:`CHECK_HORIZON` (``mine`` stays at its last pose after its end: the vehicle
+    stands there until it plans again).
+
+    A vehicle whose plan keeps clear of others' new plans need not plan again among them.
+    """
+    stay = MovingObstacle(mine.id, mine.t, mine.xy, mine.heading, mine.length, mine.width,
+                          stays=True)
+    for p in others:
+        t_end = p.t[-1] if not p.stays else max(p.t[-1], mine.t[-1])
+        t1 = min(max(t_end, t0), t0 + CHECK_HORIZON)
+        tt = np.arange(max(t0, p.t[0]), t1 + CHECK_STEP / 2.0, CHECK_STEP)
+        if not len(tt):
+            continue
+        xy1, h1, in1 = stay.at(tt)
+        xy2, h2, in2 = p.at(tt)
+        both = in1 & in2
+        # only where the bounding circles come within the margin can the boxes
+        reach = 0.5 * (math.hypot(stay.length, stay.width) + math.hypot(p.length, p.width))
+        both &= np.hypot(xy1[:, 0] - xy2[:, 0], xy1[:, 1] - xy2[:, 1]) < reach + margin
+        if not both.any():
+            continue
+        gap = box_gap(xy1[both], h1[both], (stay.length, stay.width), xy2[both], h2[both],
+                      (p.length, p.width))
+        if float(gap.min()) < margin:
+            return False
+    return True

@@ -10,6 +10,7 @@ Its perception, replanning and control are the mixins of :mod:`.perception`,
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 from collections.abc import Mapping
@@ -105,11 +106,15 @@ class Driver(Replanning, Control):
         self.priority = 0  # lower plans first (the order of entering)
         self.publish = False  # whether it publishes its plans (several planned vehicles)
         self.keep_plans = True  # keep every plan for pictures (a single ego's run)
+        self.keep_lane = False  # plan within its lane first (among SUMO's traffic)
+        self.keep_clear = False  # stop before a junction it could not leave
         self.published_plan: Any = None
+        self.own_plan: Any = None  # its latest published plan (kept)
         self.waiting_for: tuple[str, ...] = ()
         self.trusted: dict[str, Any] = {}
         self.board_seen = 0
         self.wait_replan_at = 0.0
+        self.go_at = 0.0  # when its plan has it move on, while it waits [s]
         self.conflicts: list[dict[str, Any]] = []
         self.why_slow = ""  # what holds the vehicle back (speed control), in words
         self.stand_since: float | None = None
@@ -117,6 +122,8 @@ class Driver(Replanning, Control):
         self._beside_at: tuple[float, float] | None = None
         self._cand_at: tuple[float, float] | None = None
         self._lane_of: tuple[str, int] = ("", 0)  # the last lane's id and index
+        self._times_key: tuple[float, float] | None = None  # see Control._plan_times
+        self._times: tuple[int, list[float], list[float]] = (0, [], [])
         self._ahead_box: tuple[list[float], ...] = ([], [], [], [])
         self._sample_step = 0.0
         self._cand_was: list[int] = []
@@ -166,8 +173,12 @@ class Driver(Replanning, Control):
         self.route_length = route.length
 
     def set_road(self, road: RoadCheck, polygons: Obstacles) -> None:
-        """The road check (lanes and junction areas) and the obstacle polygons."""
-        self.road = road
+        """The road check (lanes and junction areas) and the obstacle polygons.
+
+        The vehicle gets its own copy of the check, sharing the lanes: the check keeps the
+        lane segments around where it last looked, and one check for vehicles all over the
+        network would gather them again for each."""
+        self.road = copy.copy(road)
         self.polygons = polygons
 
     def goal_arrival_pos(self) -> float:

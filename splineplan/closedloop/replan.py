@@ -13,18 +13,20 @@ from typing import Any
 
 import numpy as np
 
-from splineplan.closedloop.cooperate import WAIT_REPLAN, plans_before
+from splineplan.closedloop.cooperate import WAIT_REPLAN, keeps_clear_of, plans_before
+from splineplan.closedloop.lanes import lane_band, onto_road
 from splineplan.closedloop.perception import Perception
 from splineplan.corridor import Corridor
 from splineplan.errors import (
     GeometryError,
     NoRouteError,
     RoadBlockedError,
+    SplineplanError,
     TrajectoryError,
 )
 from splineplan.geometry import FloatArray
 from splineplan.obstacles import Obstacles
-from splineplan.spacetime import published
+from splineplan.spacetime import MovingObstacle, published
 from splineplan.traffic import probe_points
 
 log = logging.getLogger(__name__)
@@ -39,6 +41,12 @@ _PATH_SPACING = 0.5
 _PATH_EXTENSION = 60.0
 #: At most one ``traffic`` replan per this many seconds.
 _TRAFFIC_REPLAN_EVERY = 0.5
+#: While waiting for others' plans, a vehicle plans again (every ``WAIT_REPLAN``) from this
+#: long [s] before its plan has it move on, not before: the plan's speed profile holds it
+#: until then, and plans in between come out the same.
+GO_EARLY = 0.5
+#: A plan has the vehicle move on once it has gone this far [m].
+_GO_MOVED = 0.5
 #: Period [s] of the checks for new obstacles ahead and for traffic beside the ego coming
 #: near the plan (a reaction time well below a driver's; the deviation and horizon checks,
 #: and the ego's own safety checks, run every step).
@@ -107,6 +115,11 @@ class Replanning(Perception):
                           self._ref_len * self._ref_len)
         self._ref_s = np.asarray(corridor.s, dtype=float).tolist()
         self._edge_starts = np.asarray(corridor.edge_starts, dtype=float).tolist()
+        # the junctions on the route: from an edge's end to the next edge's start [m]
+        ends = np.asarray(corridor.edge_ends, dtype=float).tolist()
+        self._junction_spans = ([(a, b) for a, b in zip(ends[:-1], self._edge_starts[1:],
+                                                         strict=True) if b > a]
+                                if len(ends) == len(self._edge_starts) else [])
         self._obs_cache = {}
         i = len(edges) - 1
         goal_len = self.net.length_of(ego.goal_edge)
@@ -144,10 +157,13 @@ class Replanning(Perception):
                 news = self._new_plans_near()
                 if news:
                     self.wait_replan_at = self.time + WAIT_REPLAN
-                    self._replan("cooperation", "new plan of " + ", ".join(
-                        f"'{v}'" for v in news) + " near the path",
-                                 obstacles=self._obstacles_ahead(ahead))
-                    return
+                    if self.waiting_for or not self._clear_of(news):
+                        self._replan("cooperation", "new plan of " + ", ".join(
+                            f"'{v.id}'" for v in news) + " near the path",
+                                     obstacles=self._obstacles_ahead(ahead))
+                        return
+                    # its plan keeps clear of theirs: seen, nothing to plan again
+                    self.board_seen = max(p.seq for p in self.board.values())
             if self.time >= self.traffic_after:
                 near = self._traffic_conflict()
                 if near is not None:
@@ -155,7 +171,8 @@ class Replanning(Perception):
                     self._replan("traffic", f"vehicle '{near}' beside the ego comes near the "
                                             "planned path", obstacles=self._obstacles_ahead(ahead))
                     return
-        if self.waiting_for and self.time >= self.wait_replan_at:
+        if (self.waiting_for and self.time >= self.wait_replan_at
+                and self.time >= self.go_at - GO_EARLY):
             self.wait_replan_at = self.time + WAIT_REPLAN
             self._replan("cooperation", "waiting for the plan of "
                          + ", ".join(f"'{v}'" for v in self.waiting_for),
@@ -214,8 +231,16 @@ class Replanning(Perception):
         Moving vehicles beside the ego (:meth:`_moving_obstacles`) are planned around too
         where that gives a trajectory that keeps the safety margin; otherwise the plan is
         made among the stopped obstacles alone and the moving vehicles are left to the
-        time-gap speed control.
+        time-gap speed control. A vehicle that keeps to its lane (``keep_lane``, among
+        SUMO's traffic: :mod:`.lanes`) plans within its lane first, where the moving
+        vehicles beside it are in other lanes and left to SUMO's drivers and the time gap.
         """
+        if self.keep_lane:
+            ok, err = self._plan_among(obstacles, None, in_lane=True)
+            if ok:
+                return ok, err
+            log.debug("t=%.1f no plan within the lane (%s): planning on the whole road",
+                      self.time, err)
         moving = self._moving_obstacles()
         if len(moving):
             ok, err = self._plan_among(obstacles, moving)
@@ -225,9 +250,10 @@ class Replanning(Perception):
                       "among the stopped obstacles only", self.time, err)
         return self._plan_among(obstacles, None)
 
-    def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None
-                    ) -> tuple[bool, Any]:
-        """Levels 2 and 3 among ``obstacles`` (and ``moving``, strictly: any failure or a
+    def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None, *,
+                    in_lane: bool = False) -> tuple[bool, Any]:
+        """Levels 2 and 3 among ``obstacles`` (and ``moving``, or ``in_lane``: within the
+        vehicle's lane, :func:`.lanes.lane_band`; both strictly: any failure or a
         trajectory short of the margin is a refusal, never a truncated plan)."""
         from splineplan.planner import plan_corridor
 
@@ -245,12 +271,25 @@ class Replanning(Perception):
         everything = obstacles if moving is None else obstacles + moving
         try:
             window = self.corridor.slice(s0, s1)
+            if in_lane:
+                width = self._lane_width()
+                if width is None:
+                    return False, TrajectoryError(f"no lanes known for edge "
+                                                  f"'{self._edge_at(self.station)}'")
+                window = lane_band(window, self.station - s0, self.lateral,
+                                   lane_width=width, half_width=ego.width / 2.0)
+            start = onto_road(window, (float(self.pose[0]), float(self.pose[1])))
+            if start is not None:
+                log.info("t=%.1f '%s' is off its corridor: planning from %.2f m away, on "
+                         "it", self.time, self.ego, math.hypot(start[0] - self.pose[0],
+                                                               start[1] - self.pose[1]))
+                self.pose = np.array([start[0], start[1], self.pose[2]])
             roadmaps, traj = plan_corridor(
                 window, everything, self.pose[:2], float(self.pose[2]),
                 roadmap_params=sc.roadmap, params=sc.trajectory,
                 start_speed=float(self.v), end_speed=0.0 if final else None)
         except RoadBlockedError as err:
-            if moving is not None:
+            if moving is not None or in_lane:
                 return False, err
             blocked = err
             if blocked.edge is None:
@@ -265,8 +304,11 @@ class Replanning(Perception):
         bad = np.flatnonzero(np.asarray(traj.clearance_obstacles)
                              < sc.roadmap.safety_margin - 1e-6)
         usable = None
-        if len(bad) and moving is not None:
-            return False, TrajectoryError("trajectory comes too near the traffic beside")
+        if len(bad) and (moving is not None or in_lane):
+            return False, TrajectoryError("trajectory comes too near the traffic beside"
+                                          if moving is not None else
+                                          "trajectory within the lane comes too near an "
+                                          "obstacle")
         if len(bad):
             # level 3 reports a curve that comes closer than the margin: drive only the part
             # that keeps clear, stop before the rest, and replan on the way
@@ -287,23 +329,45 @@ class Replanning(Perception):
         if self.publish and hasattr(traj, "t"):
             self.published_plan = published(traj, id=self.ego, t0=self.time,
                                             length=ego.length, width=ego.width)
+            self.own_plan = self.published_plan
+        else:
+            self.own_plan = None
         return True, None
 
-    def _new_plans_near(self) -> list[str]:
-        """Vehicles before this one that published a plan near the current path since this
-        one planned (it plans again among them)."""
+    def _lane_width(self) -> float | None:
+        """Width [m] of the lanes of the route's edge where the vehicle is (``None``: none
+        known)."""
+        edge = self._edge_at(self.station)
+        try:
+            lanes = [ln for ln in self.net.lanes_of(edge) if ln.allows(self.sc.ego.vclass)]
+        except (LookupError, SplineplanError):
+            return None
+        return float(min(ln.width for ln in lanes)) if lanes else None
+
+    def _new_plans_near(self) -> list[MovingObstacle]:
+        """The plans, published since this vehicle planned, of the vehicles before it that
+        come near its current path (grown where they cross it, as it plans among them), by
+        vehicle id."""
         if not len(self.path_xy):
             return []
         plans = plans_before(self.board, self.ego, self.priority, self.path_xy,
-                             self.path_heading, self.time, after=self.board_seen)
-        return sorted(p.id for p in plans)
+                             self.path_heading, self.time, pad=self.sc.sim.min_gap,
+                             after=self.board_seen)
+        return sorted(plans, key=lambda p: p.id)
+
+    def _clear_of(self, plans: list[MovingObstacle]) -> bool:
+        """Whether this vehicle's own latest plan keeps the safety margin from ``plans``
+        (:func:`.cooperate.keeps_clear_of`); ``False`` where it has none."""
+        mine = self.own_plan
+        if mine is None:
+            return False
+        return keeps_clear_of(mine, plans, self.time, margin=self.sc.roadmap.safety_margin)
 
     def _among_plans(self, traj: Any, roadmaps: Any, window: Any, everything: Obstacles,
                      final: bool) -> tuple[Any, Any, Obstacles]:
         """The trajectory retimed among the published plans of the vehicles before this
         one (:mod:`.cooperate`); its path planned again around the first whose margin speed
         alone cannot keep."""
-        from splineplan.errors import SplineplanError
         from splineplan.planner import plan_corridor
         from splineplan.spacetime import retime
 
@@ -348,6 +412,7 @@ class Replanning(Perception):
                     timed, sp, roadmaps = timed2, sp2, roadmaps2
                     everything = everything + static
         self.waiting_for = sp.yielded
+        self.go_at = _go_time(timed, self.time) if sp.yielded else self.time
         # the plans grown by the standstill distance where they cross (cooperate.py): the
         # control trusts them for vehicles that keep to them
         self.trusted = {p.id: p for p in plans}
@@ -389,6 +454,8 @@ class Replanning(Perception):
         self._sample_step = (float(np.hypot(np.diff(fx), np.diff(fy)).max()) * (1.0 + 1e-9)
                              if len(fx) > 1 else 0.0)
         # plain lists for the per-step interpolation along the path
+        self._pl_np = (u, self.path_speed**2)
+        self._times_key = None
         self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
                     self.path_heading.tolist(), (self.path_speed**2).tolist())
         self._full = (self.full_s.tolist(), self.full_xy[:, 0].tolist(),
@@ -445,3 +512,14 @@ class Replanning(Perception):
         # station on the route -> on the trajectory: offset by where the ego is on both
         margin = self.sc.ego.length + 2.0 * self.sc.roadmap.d + 2.0
         self.stop_at = max(self.u + (st - self.station) - margin, self.u)
+
+
+def _go_time(traj: Any, now: float) -> float:
+    """When [s] a plan made at ``now`` [s] has the vehicle move on: the time of its first
+    sample :data:`_GO_MOVED` beyond its start (``now`` where it has none)."""
+    tt = np.asarray(getattr(traj, "t", ()), dtype=float)
+    if not len(tt):
+        return now
+    s = np.asarray(traj.s, dtype=float)
+    moved = np.flatnonzero((s > s[0] + _GO_MOVED) & np.isfinite(tt))
+    return now + float(tt[moved[0]]) if len(moved) else now

@@ -457,6 +457,9 @@ class _Run:
             d.board = self.board
             d.publish = True
             d.keep_plans = False  # no pictures; hundreds of vehicles' plans would pile up
+            # SUMO's drivers see it on one lane only: keep to it where it can
+            d.keep_lane = True
+            d.keep_clear = True
 
     def _observe_all(self, arrived: tuple[str, ...]) -> None:
         for d in self.drivers:

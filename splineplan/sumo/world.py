@@ -127,6 +127,9 @@ class World:
         self.time = 0.0
         self.seconds = 0.0
         self.c: Any = None
+        #: length and width [m] of each vehicle seen around a planned one (they do not
+        #: change; read once instead of with every context subscription result)
+        self._sizes: dict[str, tuple[float, float]] = {}
 
     # -- start and stop ------------------------------------------------------------------------
     def start(self, args: list[str], *, log_file: Path | None = None) -> None:
@@ -234,9 +237,10 @@ class World:
         with its own type)."""
         s, c = self.sumo, self.c
         s.vehicle.subscribe(vid, [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_LANE_ID])
+        # (lengths and widths do not change: read once per vehicle, see :meth:`around`)
         s.vehicle.subscribeContext(vid, c.CMD_GET_VEHICLE_VARIABLE, subscribe_range,
-                                   [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_LENGTH,
-                                    c.VAR_WIDTH, c.VAR_STOPSTATE])
+                                   [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED,
+                                    c.VAR_STOPSTATE])
         if limits is not None:
             s.vehicle.setAccel(vid, limits[0])
             s.vehicle.setDecel(vid, limits[1])
@@ -281,10 +285,18 @@ class World:
         ids = [v for v in res or () if v != vid]
         if not ids:
             return NO_OTHERS
-        pos, ang, spd = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED
-        lng, wid, stop = c.VAR_LENGTH, c.VAR_WIDTH, c.VAR_STOPSTATE
-        a = np.array([(*v[pos], v[ang], v[lng], v[wid], v[spd], v[stop])
-                      for v in map(res.__getitem__, ids)], dtype=float)
+        pos, ang, spd, stop = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_STOPSTATE
+        sizes = self._sizes
+        missing = [v for v in ids if v not in sizes]
+        if missing:
+            t1 = time.perf_counter()
+            veh = self.sumo.vehicle
+            for v in missing:
+                sizes[v] = (float(veh.getLength(v)), float(veh.getWidth(v)))
+            self.seconds += time.perf_counter() - t1
+        a = np.array([(*v[pos], v[ang], *sizes[i], v[spd], v[stop])
+                      for i, v in zip(ids, map(res.__getitem__, ids), strict=True)],
+                     dtype=float)
         return Others(ids, a, stopped_speed)
 
     def signals(self, vid: str, lookahead: float, *, near: float = 0.0) -> Signals:
