@@ -297,12 +297,12 @@ def test_city_scenario_drives_the_level1_route(runs: dict[str, SimResult]) -> No
 
 
 def test_car_alongside_is_planned_around(tmp_path: Path) -> None:
-    """The first 100 s of the city among busy traffic: on two-lane roads cars come up
+    """The first 120 s of the city among busy traffic: on two-lane roads cars come up
     alongside on the other lane. The ego's widest path would drift to the middle of the
     road (into them); each such car becomes a swept obstacle and the ego keeps its side.
     Checked on SUMO's own record, with shapely."""
     sc = load_scenario(SCENARIOS / "city_traffic.toml")
-    short = dataclasses.replace(sc, sim=dataclasses.replace(sc.sim, duration=100.0))
+    short = dataclasses.replace(sc, sim=dataclasses.replace(sc.sim, duration=120.0))
     r = simulate(short, out_dir=tmp_path, progress=False)
     m = r.metrics
     assert r.status == "timeout" and m["collisions"] == 0, m["collision_events"][:3]
@@ -318,8 +318,10 @@ def test_car_alongside_is_planned_around(tmp_path: Path) -> None:
                   for v in fcd.values() if "ego" in v and car in v] for car in beside}
     assert max(len(g) for g in gaps.values()) > 30
     assert min(min(g) for g in gaps.values() if g) > 0.2
-    # SUMO's messages went to its log, the console stays clean
-    assert "emergency braking" in (tmp_path / "sumo.log").read_text()
+    # SUMO's messages (its start, its warnings about the background traffic, its end) went
+    # to its log, the console stays clean
+    log = (tmp_path / "sumo.log").read_text()
+    assert "started via libsumo" in log and "Warning:" in log and "Simulation ended" in log
     assert m["wall_time_sumo"] > 0 and m["wall_time_planner"] > 0 and m["wall_time_loop"] > 0
     assert m["wall_time_sumo"] + m["wall_time_planner"] + m["wall_time_loop"] == pytest.approx(
         m["wall_time"])
