@@ -593,7 +593,7 @@ def _internal_paving(network: RoadNetwork, from_edge: str, to_edge: str, vclass:
     :func:`_packed`; once per network (read-only)."""
     paving: tuple[FloatArray, FloatArray, IntArray] = _kept(
         network, ("internal", from_edge, to_edge, vclass),
-        lambda: _packed(_internal_quads(network, from_edge, to_edge, vclass)))
+        lambda: _packed(_internal_quads(network, from_edge, to_edge, vclass, caps=False)))
     return paving
 
 
@@ -671,14 +671,14 @@ def _clip_convex(poly: FloatArray, hull: FloatArray) -> FloatArray:
     return out
 
 
-def _internal_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str
-                    ) -> list[FloatArray]:
-    """The internal lanes of the allowed connections between two edges, as polygons."""
+def _internal_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str, *,
+                    caps: bool = True) -> list[FloatArray]:
+    """The internal lanes of the allowed connections between two edges, as polygons;
+    without ``caps``, square at their ends as SUMO draws them (see :func:`_lane_quads`)."""
     return [q for c in network.connections_between(from_edge, to_edge, vclass=vclass)
             for v in c.via
             for q in _lane_quads(network.internal_lanes[v].shape,
-                                 network.internal_lanes[v].width, back=False,
-                                 ahead=False)]
+                                 network.internal_lanes[v].width, back=caps, ahead=caps)]
 
 
 def _packed(polys: list[FloatArray]) -> tuple[FloatArray, FloatArray, IntArray]:

@@ -275,7 +275,7 @@ def _corridor_reach(net: RoadNetwork, builder: TurnBuilder, a: str, b: str) -> f
 
 #: How far [m] a corridor's side may reach beyond the paving: shapely's mitred buffers
 #: of the lanes and the corridor's sampling every 0.5 m along curved kerbs.
-REACH_TOL = 0.03
+REACH_TOL = 0.04
 
 
 @pytest.mark.parametrize("name", ["city", "grid"])
