@@ -593,7 +593,7 @@ def _internal_paving(network: RoadNetwork, from_edge: str, to_edge: str, vclass:
     :func:`_packed`; once per network (read-only)."""
     paving: tuple[FloatArray, FloatArray, IntArray] = _kept(
         network, ("internal", from_edge, to_edge, vclass),
-        lambda: _packed(_internal_quads(network, from_edge, to_edge, vclass)))
+        lambda: _packed(_internal_quads(network, from_edge, to_edge, vclass, caps=False)))
     return paving
 
 
@@ -614,20 +614,71 @@ def _junction_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: 
                     network.path.name)
     for ln in network.lanes_of(from_edge):
         if ln.allows(vclass):
-            polys += _lane_quads(_tail(ln.shape, PAVING_REACH), ln.width)
+            tail = _tail(ln.shape, PAVING_REACH)
+            polys += _lane_quads(tail, ln.width, ahead=outline is None)
+            polys += _end_cap(tail, ln.width, outline)
     for ln in network.lanes_of(to_edge):
         if ln.allows(vclass):
-            polys += _lane_quads(_tail(ln.shape[::-1], PAVING_REACH)[::-1], ln.width)
+            head = _tail(ln.shape[::-1], PAVING_REACH)
+            polys += _lane_quads(head[::-1], ln.width, back=outline is None)
+            polys += _end_cap(head, ln.width, outline)
     return polys + _internal_quads(network, from_edge, to_edge, vclass)
 
 
-def _internal_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str
-                    ) -> list[FloatArray]:
-    """The internal lanes of the allowed connections between two edges, as polygons."""
+def _end_cap(centre: FloatArray, width: float, outline: FloatArray | None
+             ) -> list[FloatArray]:
+    """The :data:`PAVING_CAP` by which a lane ending at a junction (``centre`` runs
+    towards the junction) reaches into it, cut to the convex hull of the junction's
+    outline and the lane's end: it covers the wedge SUMO leaves between a lane's square
+    end and an outline that meets it at an angle, and not the ground beside the
+    outline. ``[]`` where there is no outline (the lanes' own caps serve)."""
+    pts = dedupe_polyline(centre)
+    if outline is None or len(pts) < 2 or len(outline) < 3:
+        return []
+    d = pts[-1] - pts[-2]
+    d = d / float(np.hypot(*d))
+    n = width / 2.0 * np.array([-d[1], d[0]])
+    end = pts[-1]
+    cap = np.array([end - n, end + PAVING_CAP * d - n, end + PAVING_CAP * d + n, end + n])
+    from scipy.spatial import ConvexHull, QhullError
+
+    cloud = np.vstack((np.asarray(outline, dtype=float), end - n, end + n))
+    try:
+        hull = cloud[ConvexHull(cloud).vertices]  # counter-clockwise
+    except QhullError:
+        return []
+    out = _clip_convex(cap, hull)
+    return [out] if len(out) >= 3 else []
+
+
+def _clip_convex(poly: FloatArray, hull: FloatArray) -> FloatArray:
+    """``poly`` ``(k, 2)`` cut to the convex polygon ``hull`` (counter-clockwise)
+    (Sutherland-Hodgman)."""
+    out = poly
+    for a, b in zip(hull, np.roll(hull, -1, axis=0), strict=True):
+        if len(out) == 0:
+            break
+        e = b - a
+        side = e[0] * (out[:, 1] - a[1]) - e[1] * (out[:, 0] - a[0])  # > 0: inside
+        nxt: list[FloatArray] = []
+        for k in range(len(out)):
+            p, q, sp, sq = out[k], out[(k + 1) % len(out)], side[k], side[(k + 1) % len(out)]
+            if sp >= 0.0:
+                nxt.append(p)
+            if (sp >= 0.0) != (sq >= 0.0):
+                nxt.append(p + (q - p) * (sp / (sp - sq)))
+        out = np.array(nxt).reshape(-1, 2)
+    return out
+
+
+def _internal_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str, *,
+                    caps: bool = True) -> list[FloatArray]:
+    """The internal lanes of the allowed connections between two edges, as polygons;
+    without ``caps``, square at their ends as SUMO draws them (see :func:`_lane_quads`)."""
     return [q for c in network.connections_between(from_edge, to_edge, vclass=vclass)
             for v in c.via
             for q in _lane_quads(network.internal_lanes[v].shape,
-                                 network.internal_lanes[v].width)]
+                                 network.internal_lanes[v].width, back=caps, ahead=caps)]
 
 
 def _packed(polys: list[FloatArray]) -> tuple[FloatArray, FloatArray, IntArray]:
@@ -651,11 +702,13 @@ def _tail(shape: FloatArray, length: float) -> FloatArray:
     return _cut_polyline(pts, 1.0 - length / s[-1], 1.0)
 
 
-def _lane_quads(centre: FloatArray, width: float) -> list[FloatArray]:
+def _lane_quads(centre: FloatArray, width: float, *, back: bool = True,
+                ahead: bool = True) -> list[FloatArray]:
     """A lane as quadrilaterals ``(4, 2)``, one per segment of its centre line, each
     extended along it to the mitre of the bend at its ends (at most half the width), and
     the lane's ends by :data:`PAVING_CAP` (SUMO's junction outlines and the lanes' ends
-    meet at slightly different angles: the sliver between them is paved)."""
+    meet at slightly different angles: the sliver between them is paved); not its start
+    without ``back``, not its end without ``ahead`` (see :func:`_end_cap`)."""
     pts = dedupe_polyline(centre)
     if len(pts) < 2:
         return []
@@ -664,10 +717,10 @@ def _lane_quads(centre: FloatArray, width: float) -> list[FloatArray]:
     # the extension at each inner vertex: half the width times tan(turn / 2)
     cos_t = np.clip(np.einsum("ij,ij->i", d[:-1], d[1:]), -1.0, 1.0)
     ext = np.minimum(width / 2.0 * np.tan(np.arccos(cos_t) / 2.0), width / 2.0)
-    back = np.concatenate(([PAVING_CAP], ext))
-    ahead = np.concatenate((ext, [PAVING_CAP]))
-    a = pts[:-1] - back[:, None] * d
-    b = pts[1:] + ahead[:, None] * d
+    before = np.concatenate(([PAVING_CAP if back else 0.0], ext))
+    after = np.concatenate((ext, [PAVING_CAP if ahead else 0.0]))
+    a = pts[:-1] - before[:, None] * d
+    b = pts[1:] + after[:, None] * d
     n = width / 2.0 * np.column_stack((-d[:, 1], d[:, 0]))
     return [np.array([a[k] - n[k], b[k] - n[k], b[k] + n[k], a[k] + n[k]])
             for k in range(len(d))]

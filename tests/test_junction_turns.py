@@ -197,3 +197,95 @@ def test_a_corner_the_car_can_drive_is_planned_feasible(name: str, a: str, b: st
     x, y = np.asarray(tr.x), np.asarray(tr.y)
     assert outside(turn, x, y, np.asarray(tr.heading)) <= TOL
     assert menger_curvature(x, y).max() <= 1.01 / CarShape().min_turn_radius
+
+
+def test_the_wedge_between_a_lane_end_and_an_oblique_junction_outline_is_paved() -> None:
+    """SUMO cuts a lane square but draws the junction's outline along the other roads'
+    kerbs: where they meet at an angle, the benchmark's area paves the wedge between the
+    lane's flat end and the outline over :data:`benchmarks.turns.JOIN` past the end
+    (the lane's kerbs run on), and nothing beside the lane or beyond the outline."""
+    from shapely.geometry import Point, Polygon
+
+    from benchmarks.turns import JOIN, lane_join
+
+    lane = [(-20.0, 0.0), (0.0, 0.0)]  # 3.2 m wide, ends square at x = 0
+    # the outline's near side runs from the lane's left kerb at its end to 0.8 m ahead of
+    # its right kerb: a wedge 0.8 m deep at the right kerb
+    outline = [(0.0, 1.6), (0.8, -1.6), (12.0, -1.6), (12.0, 8.0), (0.0, 8.0)]
+    join = lane_join(lane, 3.2, outline, at_end=True)
+    assert join is not None
+    wedge = Polygon([(0.0, -1.6), (0.8, -1.6), (0.0, 1.6)])
+    covered = join.intersection(wedge).area
+    assert covered == pytest.approx(wedge.area - 0.5 * (0.8 - JOIN) * (0.8 - JOIN) * 4.0,
+                                    abs=1e-6)
+    assert join.buffer(-1e-6).disjoint(Point(0.2, -1.7).buffer(0.05))  # beside the kerb
+    assert join.within(Polygon([(0.0, -1.6), (JOIN, -1.6), (JOIN, 1.6), (0.0, 1.6)])
+                       .buffer(1e-9))
+    # a lane that starts at a junction: the same at its start
+    start = lane_join([(1.0, 0.0), (21.0, 0.0)],
+                  3.2, [(1.0, -1.6), (0.2, 1.6), (-10.0, 1.6), (-10.0, -1.6)], at_end=False)
+    assert start is not None
+    assert start.intersection(Polygon([(1.0, 1.6), (0.2, 1.6), (1.0, -1.6)])).area == \
+        pytest.approx(covered, abs=1e-6)
+    assert lane_join(lane, 3.2, [(0.0, 0.0), (1.0, 0.0)], at_end=True) is None  # no outline
+
+
+#: Monaco turns whose feasible trajectory crossed such a wedge at the junction's entry
+#: (2437 -> -1498, where the footprint's corner reached 0.15 m into it) and exit
+#: (2013#0 -> 2013#2), and one whose car reaches past a 0.2 m outgoing edge onto the far
+#: junction's internal lanes (-3444 -> 368#1).
+MONACO_TURNS = [("2437", "-1498"), ("2013#0", "2013#2"), ("-3444", "368#1")]
+
+
+@pytest.fixture(scope="module")
+def monaco(monaco_net: Path) -> tuple[RoadNetwork, TurnBuilder]:
+    return load_network(monaco_net), TurnBuilder(monaco_net)
+
+
+@pytest.mark.slow  # reading the Monaco network twice takes 5-8 s
+@pytest.mark.parametrize(("a", "b"), MONACO_TURNS)
+def test_a_feasible_monaco_turn_stays_on_the_paving(
+        monaco: tuple[RoadNetwork, TurnBuilder], a: str, b: str) -> None:
+    """The planner makes these turns feasibly from the benchmark's start, and the
+    footprint stays on the turn's paving (shapely, within :data:`TOL`)."""
+    net, builder = monaco
+    turn = builder.turn(a, b)
+    p = plan(net, a, b, start_pos=turn.start_pos, start_xy=turn.start[:2],
+             start_heading=turn.start[2])
+    tr = p.trajectory
+    assert p.route.edges == (a, b) and tr.feasible, tr.violations
+    assert outside(turn, np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.heading)) <= TOL
+
+
+def _corridor_reach(net: RoadNetwork, builder: TurnBuilder, a: str, b: str) -> float:
+    """How far [m] the corridor's sides reach beyond the turn's paving (shapely), over
+    its stretch from 3 m before the start to 3 m past the goal."""
+    import shapely
+
+    from splineplan.network import route_corridor
+
+    turn = builder.turn(a, b)
+    cor = route_corridor(net, shortest_route(net, a, b))
+    s0 = cor.to_sl(np.array([turn.start[:2]]))[0, 0] - 3.0
+    s1 = cor.to_sl(np.array(turn.goal.centroid.coords))[0, 0] + 3.0
+    near = (cor.s >= s0) & (cor.s <= s1)
+    sides = np.vstack((cor.left_xy()[near], cor.right_xy()[near]))
+    return float(shapely.distance(turn.area, shapely.points(sides)).max())
+
+
+#: How far [m] a corridor's side may reach beyond the paving: shapely's mitred buffers
+#: of the lanes and the corridor's sampling every 0.5 m along curved kerbs.
+REACH_TOL = 0.04
+
+
+@pytest.mark.parametrize("name", ["city", "grid"])
+def test_the_corridor_stays_on_the_paving_through_every_junction(name: str) -> None:
+    """Through every junction turn of the bundled networks the corridor's sides stay on
+    the turn's paving (within :data:`REACH_TOL`): the internal lanes that widen it end
+    where SUMO draws them, and a lane reaches into the junction only within the hull of
+    its outline (the city's kerbs reached 5.5 cm beyond it where an internal lane's end
+    was extended past the lane it joins at an angle)."""
+    net, builder, turns = _net(name)
+    reach = {(a, b): _corridor_reach(net, builder, a, b) for a, b in turns}
+    worst = max(reach, key=reach.__getitem__)
+    assert reach[worst] <= REACH_TOL, (worst, reach[worst])
