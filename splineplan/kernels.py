@@ -392,25 +392,45 @@ def try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: F
         if new_k > old_k + 1e-12:
             continue
         sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
-        worse = False
-        new_v = old_v = 0.0
-        for t in range(q):
-            j = a + t
-            if slack[j] >= 0 and sl[t] < 0:
-                worse = True
-            new_v, old_v = max(new_v, -sl[t]), max(old_v, -slack[j])
-        if worse or new_v > old_v + 1e-12:
+        if not footprint_kept(slack, sl, a, 0.0):
             continue
         acc[m] = True
-        for t in range(q):
-            j = a + t
-            pos[j, 0], pos[j, 1] = px[t], py[t]
-            d1[j, 0], d1[j, 1] = e1[t, 0], e1[t, 1]
-            d2[j, 0], d2[j, 1] = e2[t, 0], e2[t, 1]
-            kappa[j], slack[j], station[j] = kap[t], sl[t], sc[t]
-        ctrl[i, 0] += dx
-        ctrl[i, 1] += dy
+        apply_move(i, dx, dy, a, ctrl, pos, d1, d2, kappa, slack, station, px, py, e1, e2,
+                   kap, sl, sc)
     return acc
+
+
+@njit(cache=True, inline="always")  # as try_moves
+def footprint_kept(slack: FloatArray, sl: FloatArray, a: int, room: float
+                   ) -> bool:  # pragma: no cover - compiled
+    """Whether a move's new clearances beyond the margins ``sl`` of samples ``a ..`` keep
+    the footprint: no sample that was clear comes closer than ``min(its clearance,
+    room)`` [m], and the worst violation does not grow."""
+    new_v = old_v = 0.0
+    for t in range(len(sl)):
+        j = a + t
+        if slack[j] >= 0 and sl[t] < min(slack[j], room):
+            return False
+        new_v, old_v = max(new_v, -sl[t]), max(old_v, -slack[j])
+    return new_v <= old_v + 1e-12
+
+
+@njit(cache=True, inline="always")  # as try_moves
+def apply_move(i: int, dx: float, dy: float, a: int, ctrl: FloatArray, pos: FloatArray,
+               d1: FloatArray, d2: FloatArray, kappa: FloatArray, slack: FloatArray,
+               station: FloatArray, px: FloatArray, py: FloatArray, e1: FloatArray,
+               e2: FloatArray, kap: FloatArray, sl: FloatArray, sc: FloatArray
+               ) -> None:  # pragma: no cover - compiled
+    """Keep a move of control point ``i`` by ``(dx, dy)``: its samples ``a ..`` take the
+    new positions, derivatives, curvatures, clearances and stations."""
+    for t in range(len(px)):
+        j = a + t
+        pos[j, 0], pos[j, 1] = px[t], py[t]
+        d1[j, 0], d1[j, 1] = e1[t, 0], e1[t, 1]
+        d2[j, 0], d2[j, 1] = e2[t, 0], e2[t, 1]
+        kappa[j], slack[j], station[j] = kap[t], sl[t], sc[t]
+    ctrl[i, 0] += dx
+    ctrl[i, 1] += dy
 
 
 @njit(cache=True)
@@ -664,23 +684,9 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
             px[t], py[t] = npos[u, 0], npos[u, 1]
             head[t] = np.arctan2(ne1[u, 1], ne1[u, 0])
         sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
-        clear = True
-        new_s = old_s = 0.0
-        for t in range(q):
-            j = a + t
-            if slack[j] >= 0 and sl[t] < min(slack[j], SMOOTH_ROOM):
-                clear = False
-            new_s, old_s = max(new_s, -sl[t]), max(old_s, -slack[j])
-        if not clear or new_s > old_s + 1e-12:
+        if not footprint_kept(slack, sl, a, SMOOTH_ROOM):
             continue
-        for t in range(q):
-            j = a + t
-            u = j - a0
-            pos[j, 0], pos[j, 1] = npos[u, 0], npos[u, 1]
-            d1[j, 0], d1[j, 1] = ne1[u, 0], ne1[u, 1]
-            d2[j, 0], d2[j, 1] = ne2[u, 0], ne2[u, 1]
-            kappa[j], slack[j], station[j] = kap[t], sl[t], sc[t]
-        ctrl[i, 0] += dx
-        ctrl[i, 1] += dy
+        apply_move(i, dx, dy, a, ctrl, pos, d1, d2, kappa, slack, station, px, py,
+                   ne1[a - a0:b - a0], ne2[a - a0:b - a0], kap, sl, sc)
         return True
     return False
