@@ -730,7 +730,6 @@ class CommonRoadPlan:
 def plan(problem: Problem, *, vehicle_type: int = 2,
          roadmap_params: RoadmapParams | None = None) -> CommonRoadPlan:
     """Solve the planning problem (see the module docstring)."""
-    from splineplan.planner import plan_corridor
 
     car = vehicle(vehicle_type)
     t_start = time.perf_counter()
@@ -764,52 +763,17 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     moving = _moving(sc)
     road_ends = not any(net.find_lanelet_by_id(route.chain[-1]).successor)
     end_speed = 0.0 if road_ends else None
-    obstacles = statics
     t0 = float(init.time_step) * problem.dt
-    v_start = min(v0, tp.s_max)
-    try:
-        corridor, tr = _through_goal(corridor, goal, obstacles, centre0, head0, rp, tp,
-                                     v_start, end_speed)
-    except RoadBlockedError:
-        # the route's lanes are blocked: the oncoming lane beside them is passing space
-        corridor, tr = _through_goal(route_corridor(net, route, statics, passing=True), goal,
-                                     obstacles, centre0, head0, rp, tp, v_start, end_speed)
-    # a curve from the start: its tangent is the centre's direction, turned from the
-    # body's orientation by the slip angle of the curve's first curvature (the wheels then
-    # start at the curve's angle); the slip that the path planned with it has, by the
-    # secant method
-    tried = [(0.0, _slip(tr, car))]
-    while abs(tried[-1][1] - tried[-1][0]) > SLIP_REPLAN and len(tried) < 3:
-        if len(tried) == 1:
-            beta = tried[0][1]
-        else:
-            (b0, g0), (b1, g1) = tried[-2], tried[-1]
-            slope = (g1 - g0) / (b1 - b0) if b1 != b0 else 0.0
-            beta = b1 + (g1 - b1) / (1.0 - slope) if slope != 1.0 else g1
-        again = plan_corridor(corridor, obstacles, centre0, head0 + beta, roadmap_params=rp,
-                              params=tp, start_speed=min(v0, tp.s_max),
-                              end_speed=end_speed).trajectory
-        tried.append((beta, _slip(again, car)))
-        tr = again
     timing = _Timing(tp, goal, v0, problem.dt, int(init.time_step), t0, end_speed, moving,
                      car)
-    tr, sp = timing.best(tr)
-    for _ in range(2):  # speed first; the path around a conflict speed cannot resolve
-        if sp is None or sp.conflict is None:
-            break
-        swept = sp.conflict.as_static()
-        if swept.near_mask(centre0[None], car.length).any():
-            break  # it reaches the car where it stands: no path can start clear of it
-        more = obstacles + swept
-        try:
-            again = plan_corridor(corridor, more, centre0, head0, roadmap_params=rp, params=tp,
-                                  start_speed=min(v0, tp.s_max),
-                                  end_speed=end_speed).trajectory
-        except SplineplanError as err:
-            log.debug("no path around moving obstacle %s: %s", sp.conflict.obstacle.id, err)
-            break
-        obstacles = more
-        tr, sp = timing.best(again)
+    solver = _Solver(statics, centre0, head0, rp, tp, min(v0, tp.s_max), end_speed, car,
+                     timing)
+    try:
+        corridor, tr, sp, obstacles = solver.through_goal(corridor, goal)
+    except RoadBlockedError:
+        # the route's lanes are blocked: the oncoming lane beside them is passing space
+        corridor, tr, sp, obstacles = solver.through_goal(
+            route_corridor(net, route, statics, passing=True), goal)
     yielded = tuple(sp.yielded) if sp is not None else ()
     passed = tuple(sp.passed) if sp is not None else ()
     seconds = time.perf_counter() - t_start
@@ -820,31 +784,86 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
                           yielded, passed, seconds)
 
 
-def _through_goal(corridor: Corridor, goal: Goal, obstacles: Obstacles, centre: FloatArray,
-                  heading: float, rp: RoadmapParams, tp: TrajectoryParams, start_speed: float,
-                  end_speed: float | None) -> tuple[Corridor, Trajectory]:
-    """The corridor and the first trajectory along it: through the goal's position
-    (:func:`goal_keep`), unless the path through it is not feasible or cannot be driven at
-    the start's speed (a goal beside the lane just ahead) where the plain corridor's is."""
-    from splineplan.planner import plan_corridor
+@dataclass(frozen=True, eq=False)
+class _Solver:
+    """Levels 2 and 3 along a corridor, then the speed among the moving obstacles
+    (:class:`_Timing`), for one planning problem."""
 
-    def first(cor: Corridor) -> Trajectory:
-        return plan_corridor(cor, obstacles, centre, heading, roadmap_params=rp, params=tp,
-                             start_speed=start_speed, end_speed=end_speed).trajectory
+    statics: Obstacles
+    centre: FloatArray
+    heading: float
+    rp: RoadmapParams
+    tp: TrajectoryParams
+    start_speed: float
+    end_speed: float | None
+    car: Vehicle
+    timing: _Timing
 
-    kept = goal_keep(corridor, goal)
-    if kept is corridor:
-        return corridor, first(corridor)
-    try:
-        tr = first(kept)
-        if tr.feasible and tr.speed[0] >= start_speed - 1e-6:
-            return kept, tr
-    except RoadBlockedError:
-        tr = None
-    plain = first(corridor)
-    if tr is None or (plain.feasible and plain.speed[0] >= start_speed - 1e-6):
-        return corridor, plain
-    return kept, tr
+    def path(self, corridor: Corridor, obstacles: Obstacles, heading: float) -> Trajectory:
+        from splineplan.planner import plan_corridor
+
+        return plan_corridor(corridor, obstacles, self.centre, heading,
+                             roadmap_params=self.rp, params=self.tp,
+                             start_speed=self.start_speed, end_speed=self.end_speed).trajectory
+
+    def solve(self, corridor: Corridor) -> tuple[Corridor, Trajectory, Any, Obstacles]:
+        """The corridor, the timed trajectory, its space-time speed plan (``None`` without
+        moving obstacles) and the static obstacles it was planned among."""
+        car, obstacles = self.car, self.statics
+        tr = self.path(corridor, obstacles, self.heading)
+        # a curve from the start: its tangent is the centre's direction, turned from the
+        # body's orientation by the slip angle of the curve's first curvature (the wheels
+        # then start at the curve's angle); the slip that the path planned with it has, by
+        # the secant method
+        tried = [(0.0, _slip(tr, car))]
+        while abs(tried[-1][1] - tried[-1][0]) > SLIP_REPLAN and len(tried) < 3:
+            if len(tried) == 1:
+                beta = tried[0][1]
+            else:
+                (b0, g0), (b1, g1) = tried[-2], tried[-1]
+                slope = (g1 - g0) / (b1 - b0) if b1 != b0 else 0.0
+                beta = b1 + (g1 - b1) / (1.0 - slope) if slope != 1.0 else g1
+            tr = self.path(corridor, obstacles, self.heading + beta)
+            tried.append((beta, _slip(tr, car)))
+        tr, sp = self.timing.best(tr)
+        for _ in range(2):  # speed first; the path around a conflict speed cannot resolve
+            if sp is None or sp.conflict is None:
+                break
+            swept = sp.conflict.as_static()
+            if swept.near_mask(self.centre[None], car.length).any():
+                break  # it reaches the car where it stands: no path can start clear of it
+            more = obstacles + swept
+            try:
+                again = self.path(corridor, more, self.heading)
+            except SplineplanError as err:
+                log.debug("no path around moving obstacle %s: %s", sp.conflict.obstacle.id,
+                          err)
+                break
+            obstacles = more
+            tr, sp = self.timing.best(again)
+        return corridor, tr, sp, obstacles
+
+    def through_goal(self, corridor: Corridor, goal: Goal
+                     ) -> tuple[Corridor, Trajectory, Any, Obstacles]:
+        """:meth:`solve` through the goal's position (:func:`goal_keep`); along the plain
+        corridor too where that leaves a conflict with a moving obstacle, an infeasible
+        path or one that cannot be driven at the start's speed (a goal beside the lane just
+        ahead), and the better of the two."""
+        kept = goal_keep(corridor, goal)
+        first = self.solve(kept)
+        if kept is corridor or self._score(first)[:3] == (True, True, True):
+            return first
+        second = self.solve(corridor)
+        return max((first, second), key=self._score)  # a tie keeps the goal's
+
+    def _score(self, result: tuple[Corridor, Trajectory, Any, Obstacles]
+               ) -> tuple[bool, bool, bool, float]:
+        """Clear of the moving obstacles, feasible, driven at the start's speed, and the
+        later conflict where both have one."""
+        _, tr, sp, _ = result
+        clear = sp is None or sp.conflict is None
+        return (clear, bool(tr.feasible), bool(tr.speed[0] >= self.start_speed - 1e-6),
+                math.inf if clear else float(sp.conflict.t))
 
 
 def goal_keep(corridor: Corridor, goal: Goal) -> Corridor:
