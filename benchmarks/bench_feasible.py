@@ -1,0 +1,100 @@
+"""Feasible plans on seeded random routes: how often levels 1-3 give a trajectory a car can drive.
+
+``python -m benchmarks feasible [--routes N] [--seed S] [--nets city grid monaco]``.
+Random pairs of edges the passenger class may use, routed without turnarounds
+(:func:`splineplan.route.shortest_route`); kept when the route is 0.3-3 km long on the
+bundled networks and 0.5-3 km on Monaco (``../shared/data``, skipped when absent), and when
+the planned route needs no turnaround. ``splineplan.pipeline.plan`` plans each with its
+defaults and no obstacles. Printed per network: routes, feasible, those whose route takes a
+junction turn level 1 finds too tight for the car (``Route.tight_turns``) and feasible among
+the others, and the first limit each infeasible plan breaks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import logging
+import random
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+NETS = {"city": (ROOT / "sumo_nets" / "city.net.xml", 300.0),
+        "grid": (ROOT / "sumo_nets" / "grid.net.xml", 300.0),
+        "monaco": (ROOT.parent / "shared" / "data" / "monaco.net.xml.gz", 500.0)}
+LONGEST = 3000.0
+
+
+def bench_network(path: Path, shortest: float, n_routes: int, seed: int) -> dict[str, int]:
+    """Plan ``n_routes`` random routes on one network; print and return the counts."""
+    from splineplan.errors import SplineplanError
+    from splineplan.network import load_network
+    from splineplan.pipeline import plan, turnarounds
+    from splineplan.route import shortest_route
+
+    net = load_network(path)
+    rng = random.Random(seed)
+    usable = [e for e in net.edge_ids if net.allows(e, "passenger")]
+    counts = collections.Counter[str]()
+    broken = collections.Counter[str]()
+    t0 = time.perf_counter()
+    tries = 0
+    while counts["routes"] < n_routes and tries < 500 * n_routes:
+        tries += 1
+        a, b = rng.choice(usable), rng.choice(usable)
+        try:
+            if not shortest <= shortest_route(net, a, b, turnarounds=False).length <= LONGEST:
+                continue
+        except SplineplanError:
+            continue
+        try:
+            p = plan(net, a, b)
+        except SplineplanError as err:
+            counts["routes"] += 1
+            broken[f"error ({type(err).__name__})"] += 1
+            continue
+        if turnarounds(net, p.route):
+            continue
+        counts["routes"] += 1
+        tight = bool(p.route.tight_turns)
+        counts["tight"] += tight
+        if p.trajectory.feasible:
+            counts["feasible"] += 1
+            counts["feasible_fit"] += not tight
+        else:
+            v = p.trajectory.violations
+            broken[v[0].kind if v else "unknown"] += 1
+    n, ok = counts["routes"], counts["feasible"]
+    fit = n - counts["tight"]
+    print(f"{path.name}: {n} routes of {shortest / 1e3:.1f}-{LONGEST / 1e3:.0f} km with no "
+          f"turnaround: feasible {ok} ({100.0 * ok / max(n, 1):.0f} %); {counts['tight']} take "
+          f"a turn too tight for the car, feasible among the other {fit}: "
+          f"{counts['feasible_fit']} ({100.0 * counts['feasible_fit'] / max(fit, 1):.0f} %); "
+          f"infeasible by the first limit broken: {dict(broken) or '-'} "
+          f"({time.perf_counter() - t0:.0f} s)", flush=True)
+    return dict(counts)
+
+
+def main(argv: list[str]) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks feasible", description=__doc__)
+    ap.add_argument("--routes", type=int, default=None,
+                    help="routes per network (20 on city and grid, 100 on Monaco)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--nets", nargs="+", default=list(NETS), choices=list(NETS))
+    args = ap.parse_args(argv)
+    logging.disable(logging.WARNING)  # the pipeline's warnings about tight turns
+    for name in args.nets:
+        path, shortest = NETS[name]
+        if not path.exists():
+            print(f"{name}: {path} not found, skipped")
+            continue
+        bench_network(path, shortest, args.routes or (100 if name == "monaco" else 20),
+                      args.seed)
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main(sys.argv[1:]))
