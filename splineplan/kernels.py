@@ -483,6 +483,12 @@ def steering_angle(kappa: float, wheelbase: float) -> float:  # pragma: no cover
     return float(np.arctan(wheelbase * kappa / np.sqrt(max(1.0 - half * half, 1e-12))))
 
 
+@njit(cache=True, inline="always")  # as try_moves
+def corner_speed(kappa: float, mu_g: float, s_max: float) -> float:  # pragma: no cover
+    """:func:`splineplan.speed.allowed_speed` (equation (1)) of one sample."""
+    return min(s_max, np.sqrt(mu_g / abs(kappa))) if kappa != 0.0 else s_max
+
+
 @njit(cache=True)
 def allowed_speeds(pos: FloatArray, d1: FloatArray, d2: FloatArray, a: int, b: int,
                    wheelbase: float, rate: float, mu_g: float, s_max: float
@@ -497,7 +503,7 @@ def allowed_speeds(pos: FloatArray, d1: FloatArray, d2: FloatArray, a: int, b: i
     for t in range(q):
         j = a + t
         kap = curvature(d1[j, 0], d1[j, 1], d2[j, 0], d2[j, 1])
-        corner[t] = min(s_max, np.sqrt(mu_g / abs(kap))) if kap != 0.0 else s_max
+        corner[t] = corner_speed(kap, mu_g, s_max)
         delta = steering_angle(kap, wheelbase)
         if t > 0:
             turn = abs(delta - prev)
@@ -663,9 +669,8 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
                 if kap[j - a] > old_k + 1e-12:
                     good = False
                     break
-            corner = min(s_max, np.sqrt(mu_g / abs(kap_u))) if kap_u != 0.0 else s_max
             delta = steering_angle(kap_u, wheelbase)
-            limit = corner
+            limit = corner_speed(kap_u, mu_g, s_max)
             if u > 0:
                 turn = abs(delta - prev)
                 if turn > 0.0:

@@ -274,7 +274,6 @@ def test_planned_vehicle_keeps_to_its_lane_among_sumo_traffic(tmp_path: Path) ->
     assert r.vehicles["p"].metrics["time_off_road"] == 0.0
 
 
-
 def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
     """A car crawls just beyond a junction: a planned vehicle coming up behind it stops
     before the junction, as SUMO's drivers do, rather than in it, where it would stand in

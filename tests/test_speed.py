@@ -8,7 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from splineplan.errors import ParameterError
-from splineplan.speed import allowed_speed, speed_profile, times_from_profile
+from splineplan.speed import (
+    allowed_speed,
+    speed_profile,
+    steering_speed_limit,
+    times_from_profile,
+)
 
 
 def test_allowed_speed_equation_1() -> None:
@@ -91,3 +96,29 @@ def test_the_wheels_keep_up_with_the_curvature(seed: int, rate: float, v0: float
     inner = slice(102, 138)
     corner = allowed_speed(kappa[inner], mu=0.7, g=9.81, s_max=13.89)
     assert np.all(limit[inner] == corner)
+
+
+@settings(deadline=None)  # the first example compiles the loop
+@given(seed=st.integers(0, 2**32 - 1))
+def test_the_compiled_limits_are_the_array_code(seed: int) -> None:
+    """Level 3's steering smoothing judges its moves with a compiled twin of equation (1)
+    and the steering rate's limit (``kernels.allowed_speeds``, from a curve's positions and
+    parameter derivatives): on a random curve it gives what ``allowed_speed`` and
+    ``steering_speed_limit`` give from the same curvatures and chord lengths."""
+    from splineplan import kernels
+    from splineplan.curvature import curvature_from_derivatives
+
+    rng = np.random.default_rng(seed)
+    m = 60
+    d1 = np.column_stack((rng.uniform(0.5, 2.0, m), rng.uniform(-1.0, 1.0, m)))
+    d2 = rng.uniform(-0.3, 0.3, (m, 2))
+    pos = np.cumsum(np.column_stack((rng.uniform(0.2, 1.0, m), rng.uniform(-0.3, 0.3, m))),
+                    axis=0)
+    kappa = curvature_from_derivatives(d1, d2)
+    corner, steer = kernels.allowed_speeds(pos, d1, d2, 0, m, 2.578, 0.4, 0.7 * 9.81, 15.0)
+    chords = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(pos, axis=0).T))))
+    np.testing.assert_allclose(corner, allowed_speed(kappa, mu=0.7, g=9.81, s_max=15.0),
+                               rtol=1e-12)
+    np.testing.assert_allclose(
+        steer, steering_speed_limit(chords, kappa, wheelbase=2.578, max_steering_rate=0.4),
+        rtol=1e-9)
