@@ -6,8 +6,9 @@ Random pairs of edges the passenger class may use, routed without turnarounds
 bundled networks and 0.5-3 km on Monaco (``../shared/data``, skipped when absent), and when
 the planned route needs no turnaround. ``splineplan.pipeline.plan`` plans each with its
 defaults and no obstacles. Printed per network: routes, feasible, those whose route takes a
-junction turn level 1 finds too tight for the car (``Route.tight_turns``) and feasible among
-the others, and the first limit each infeasible plan breaks.
+junction turn or an edge's bend that level 1 finds too tight for the car
+(``Route.tight_turns``, ``Route.tight_bends``) and feasible among the others, and the first
+limit each infeasible plan breaks.
 """
 
 from __future__ import annotations
@@ -57,7 +58,7 @@ def bench_network(path: Path, shortest: float, n_routes: int, seed: int) -> dict
         if turnarounds(net, p.route):
             continue
         counts["routes"] += 1
-        tight = bool(p.route.tight_turns)
+        tight = bool(p.route.tight_turns or p.route.tight_bends)
         counts["tight"] += tight
         if p.trajectory.feasible:
             counts["feasible"] += 1
@@ -69,7 +70,7 @@ def bench_network(path: Path, shortest: float, n_routes: int, seed: int) -> dict
     fit = n - counts["tight"]
     print(f"{path.name}: {n} routes of {shortest / 1e3:.1f}-{LONGEST / 1e3:.0f} km with no "
           f"turnaround: feasible {ok} ({100.0 * ok / max(n, 1):.0f} %); {counts['tight']} take "
-          f"a turn too tight for the car, feasible among the other {fit}: "
+          f"a turn or bend too tight for the car, feasible among the other {fit}: "
           f"{counts['feasible_fit']} ({100.0 * counts['feasible_fit'] / max(fit, 1):.0f} %); "
           f"infeasible by the first limit broken: {dict(broken) or '-'} "
           f"({time.perf_counter() - t0:.0f} s)", flush=True)

@@ -73,7 +73,9 @@ def _allowed(lane: Any, vclass: str) -> bool:
     return bool(lane.allows(vclass))
 
 
-def _band(shape: list[tuple[float, ...]], width: float) -> Any:
+def lane_band(shape: Any, width: float) -> Any:
+    """A lane's area: its centre line ``shape`` (points of x, y [m]) widened by half
+    ``width`` [m] each side, mitred at its bends (as SUMO draws it), square at its ends."""
     line = LineString([p[:2] for p in shape])
     return line.buffer(width / 2.0, cap_style="flat", join_style="mitre", mitre_limit=3.0)
 
@@ -144,7 +146,7 @@ class TurnBuilder:
         junction = a.getToNode()
         la = [ln for ln in a.getLanes() if _allowed(ln, vclass)]
         lb = [ln for ln in b.getLanes() if _allowed(ln, vclass)]
-        parts = [_band(ln.getShape(), ln.getWidth()) for ln in la + lb]
+        parts = [lane_band(ln.getShape(), ln.getWidth()) for ln in la + lb]
         for node in (junction, a.getFromNode(), b.getToNode()):
             outline = node.getShape()
             if len(outline) >= 3:
@@ -163,7 +165,7 @@ class TurnBuilder:
                  for v in _via_lanes(snet, c)]
         vias += [v for e in b.getOutgoing() for c in _conns(snet, b, e, vclass)
                  for v in _via_lanes(snet, c)]
-        parts += [_band(v.getShape(), v.getWidth()) for v in vias if len(v.getShape()) >= 2]
+        parts += [lane_band(v.getShape(), v.getWidth()) for v in vias if len(v.getShape()) >= 2]
         area = _closed(unary_union(parts))
         # the start: LEAD before the end of the incoming edge, midway across its lanes
         ra, rl = LineString([p[:2] for p in la[0].getShape()]), \

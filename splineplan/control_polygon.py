@@ -309,7 +309,7 @@ def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
     rows = np.ones(m - 2)
     target = TURN_SHARE * kappa_max
     for r in range(rounds - 1):
-        turn, legs = _polygon_turns(origin + x[:, None] * normal)
+        turn, legs = polygon_turns(origin + x[:, None] * normal)
         if not np.any(turn > target):
             break
         if r > 0:
@@ -324,18 +324,18 @@ def min_turning_offsets(origin: FloatArray, normal: FloatArray, lo: FloatArray,
 
 def _turning(pts: FloatArray, kappa: float) -> NDArray[np.bool_]:
     """Per vertex after the first of a polygon ``(m, 2)`` (``(m - 1,)``): whether it, or
-    one of the two before it, turns by more than ``kappa`` [1/m] (:func:`_polygon_turns`)."""
+    one of the two before it, turns by more than ``kappa`` [1/m] (:func:`polygon_turns`)."""
     out = np.zeros(len(pts) - 1, dtype=bool)
     if len(pts) < 3:
         return out
-    bent = _polygon_turns(pts)[0] > kappa
+    bent = polygon_turns(pts)[0] > kappa
     out[:-1] |= bent
     out[1:] |= bent
     out[2:] |= bent[:-1]
     return out
 
 
-def _polygon_turns(pts: FloatArray) -> tuple[FloatArray, FloatArray]:
+def polygon_turns(pts: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Discrete curvature ``(m - 2,)`` [1/m] at the inner vertices of a polygon ``(m, 2)``
     (turning angle over the mean of the two legs) and its leg lengths ``(m - 1,)`` [m]."""
     d = np.diff(pts, axis=0)

@@ -25,7 +25,7 @@ import numpy as np
 
 from splineplan.errors import NoRouteError, ParameterError, VehicleClassError
 from splineplan.geometry import FloatArray
-from splineplan.network import CarShape, ClassGraph, RoadNetwork, turn_fits
+from splineplan.network import CarShape, ClassGraph, RoadNetwork, bend_fits, turn_fits
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +56,10 @@ class Route:
         Turns ``(from_edge, to_edge)`` of the route that the car asked for cannot make
         within the paving (:func:`splineplan.network.turn_fits`): taken only where no
         route avoids them; empty where no car was given.
+    tight_bends
+        Edges of the route whose own bends the car cannot follow within their lanes
+        (:func:`splineplan.network.bend_fits`): the origin and destination, or others
+        where no route avoids them; empty where no car was given.
     """
 
     edges: tuple[str, ...]
@@ -65,6 +69,7 @@ class Route:
     vclass: str
     start_pos: float = 0.0
     tight_turns: tuple[tuple[str, str], ...] = ()
+    tight_bends: tuple[str, ...] = ()
 
     @property
     def origin(self) -> str:
@@ -113,9 +118,11 @@ def shortest_route(
     car
         The vehicle's footprint and turning radius. Where given, the route avoids junction
         turns that this car cannot make within the paving (:func:`~splineplan.network.
-        turn_fits`, tested on the turns of each route found, cached per network and car):
-        it is the least-cost route without them where one exists; where none does, the
-        least-cost route, with a logged warning and :attr:`Route.tight_turns` naming them.
+        turn_fits`) and edges whose bends it cannot follow within their lanes
+        (:func:`~splineplan.network.bend_fits`), each tested on the routes found and
+        cached per network and car: it is the least-cost route without them where one
+        exists; where none does, the least-cost route, with a logged warning and
+        :attr:`Route.tight_turns` and :attr:`Route.tight_bends` naming them.
 
     Raises
     ------
@@ -154,9 +161,10 @@ def shortest_route(
     potential = search.potential(src, dst)
     path = dijkstra(adjacency, src, dst, blocked, potential)
     tight: list[tuple[int, int]] = []
+    bends: list[int] = []
     if path is not None and car is not None:
-        path, tight = _without_tight_turns(network, vclass, car, adjacency, path, blocked,
-                                           potential)
+        path, tight, bends = _without_tight_turns(network, vclass, car, adjacency, path,
+                                                  blocked, potential)
     if path is None:
         msg = (f"no route from edge '{from_edge}' to edge '{to_edge}' "
                f"for vehicle class '{vclass}'")
@@ -181,11 +189,16 @@ def shortest_route(
             f"'{a}' to edge '{b}'" for (a, b), (u, _) in zip(turns, tight, strict=True))
         log.warning("route %s -> %s takes %d turn(s) too tight for the car (%s), as no route "
                     "avoids them: %s", from_edge, to_edge, len(turns), car, where)
+    bent = tuple(network.edge_ids[i] for i in bends)
+    if bent:
+        log.warning("route %s -> %s takes %d edge(s) with a bend too tight for the car (%s), "
+                    "as no route avoids them: %s", from_edge, to_edge, len(bent), car,
+                    ", ".join(f"'{e}'" for e in bent))
     return Route(edges=edges, length=length, cost=cost, weight=weight, vclass=vclass,
-                 start_pos=start_pos, tight_turns=turns)
+                 start_pos=start_pos, tight_turns=turns, tight_bends=bent)
 
 
-#: Routes :func:`_without_tight_turns` tries before it keeps the tight turns.
+#: Routes :func:`_without_tight_turns` tries before it keeps the tight turns and bends.
 MAX_TIGHT_DETOURS = 16
 
 
@@ -193,12 +206,18 @@ def _without_tight_turns(
     network: RoadNetwork, vclass: str, car: CarShape,
     adjacency: list[list[tuple[int, float]]], path: list[int], blocked: set[int],
     potential: list[float],
-) -> tuple[list[int], list[tuple[int, int]]]:
+) -> tuple[list[int], list[tuple[int, int]], list[int]]:
     """The least-cost path without turns the car cannot make (their arcs dropped one
-    route at a time: the landmark bounds hold on a graph with fewer arcs), or ``path``
-    and its tight turns where none avoids them (within :data:`MAX_TIGHT_DETOURS` tries).
-    Turnarounds are not tested, and a detour may not add one."""
+    route at a time: the landmark bounds hold on a graph with fewer arcs) and without
+    edges whose bends it cannot follow (blocked likewise, but the origin and
+    destination), with the edges of tight bends it keeps; or ``path``, its tight turns
+    and its edges of tight bends where none avoids them (within
+    :data:`MAX_TIGHT_DETOURS` tries). Turnarounds are not tested, and a detour may not
+    add one."""
     ids = network.edge_ids
+
+    def bends_of(p: list[int]) -> list[int]:
+        return [v for v in p if not bend_fits(network, ids[v], vclass, car)]
 
     def tight_of(p: list[int]) -> list[tuple[int, int]]:
         # turnarounds are no forward turn at all: the planner knows them apart
@@ -210,23 +229,27 @@ def _without_tight_turns(
         return [(u, v) for u, v in itertools.pairwise(p)
                 if is_turnaround(network, ids[u], ids[v], vclass)]
 
-    first = tight_of(path)
-    if not first:
-        return path, []
+    ends = {path[0], path[-1]}
+    first, first_bent = tight_of(path), bends_of(path)
+    if not first and ends.issuperset(first_bent):
+        return path, [], first_bent
     skip = set(first)
+    bent = set(first_bent) - ends
     allowed_backs = set(backs_of(path))  # a detour may not add a turnaround either
     for _ in range(MAX_TIGHT_DETOURS):
         adj = list(adjacency)
         for u in {u for u, _ in skip}:
             adj[u] = [(w, c) for w, c in adjacency[u] if (u, w) not in skip]
-        alt = dijkstra(adj, path[0], path[-1], blocked, potential)
+        alt = dijkstra(adj, path[0], path[-1], blocked | bent, potential)
         if alt is None:
             break
         bad = tight_of(alt) + [b for b in backs_of(alt) if b not in allowed_backs]
-        if not bad:
-            return alt, []
+        alt_bent = set(bends_of(alt)) - ends
+        if not bad and not alt_bent:
+            return alt, [], bends_of(alt)
         skip.update(bad)
-    return path, first
+        bent |= alt_bent
+    return path, first, first_bent
 
 
 def dijkstra(

@@ -14,10 +14,10 @@ from splineplan.control_polygon import (
     _TOL,
     _band_ends,
     _farthest_from,
-    _polygon_turns,
     band_simplify,
     min_bending_offsets,
     min_turning_offsets,
+    polygon_turns,
 )
 
 
@@ -248,8 +248,8 @@ def test_min_turning_offsets_spread_a_corner_within_the_bands(radius: float) -> 
     bend = min_bending_offsets(origin, normal, lo, hi, centre, 1e-4)
     turn = min_turning_offsets(origin, normal, lo, hi, centre, 1e-4, kappa_max)
     assert np.all((turn >= lo - 1e-9) & (turn <= hi + 1e-9))
-    worst_bend = _polygon_turns(origin + bend[:, None] * normal)[0].max()
-    worst_turn = _polygon_turns(origin + turn[:, None] * normal)[0].max()
+    worst_bend = polygon_turns(origin + bend[:, None] * normal)[0].max()
+    worst_turn = polygon_turns(origin + turn[:, None] * normal)[0].max()
     assert worst_turn <= worst_bend + 1e-9
     if radius == 1.5:
         assert worst_bend > kappa_max
