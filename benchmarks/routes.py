@@ -31,11 +31,13 @@ TRIES_PER_ROUTE = 500
 
 @dataclass(frozen=True)
 class RandomRoute:
-    """One drawn route: its edges' ids, the open-loop plan (``None`` where planning raised)
-    and the error (a :class:`~splineplan.errors.SplineplanError`) where it did."""
+    """One drawn route: its edges' ids, the length [m] of the shortest route without
+    turnarounds between them, the open-loop plan (``None`` where planning raised) and the
+    error (a :class:`~splineplan.errors.SplineplanError`) where it did."""
 
     from_edge: str
     to_edge: str
+    length: float
     plan: Any
     error: Exception | None = None
 
@@ -55,17 +57,18 @@ def random_routes(net: Any, n_routes: int, seed: int, shortest: float,
         tries += 1
         a, b = rng.choice(usable), rng.choice(usable)
         try:
-            if not shortest <= shortest_route(net, a, b, turnarounds=False).length <= longest:
-                continue
+            length = shortest_route(net, a, b, turnarounds=False).length
         except SplineplanError:
+            continue
+        if not shortest <= length <= longest:
             continue
         try:
             p = plan(net, a, b)
         except SplineplanError as err:
             found += 1
-            yield RandomRoute(a, b, None, err)
+            yield RandomRoute(a, b, length, None, err)
             continue
         if turnarounds(net, p.route):
             continue
         found += 1
-        yield RandomRoute(a, b, p)
+        yield RandomRoute(a, b, length, p)
