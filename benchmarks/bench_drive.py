@@ -10,16 +10,20 @@ becomes a closed-loop scenario with no other traffic: on Monaco ``scenarios/mona
 with its ego's start and goal edges replaced, on city and grid ``scenarios/city.toml``'s
 parameters on that network without its traffic. The ego starts on the rightmost lane its
 class may use, 20 m along the start edge (the front bumper; at most the edge's length, at
-least the car's), and drives to the goal edge's end; the run lasts 60 s plus the route's
-length at 5 m/s. :func:`splineplan.sim.simulate` runs each in turn (libsumo: one run at a
-time in the process); a run that raises a ``SplineplanError`` counts as failed, with its
-message, and what it recorded before (``metrics.json``) still counts.
+least the car's: a route whose start edge is shorter than the car is not run), and drives
+to the goal edge's end; the run lasts 60 s plus the route's length at 5 m/s.
+:func:`splineplan.sim.simulate` runs each in turn (libsumo: one run at a time in the
+process); a run that raises a ``SplineplanError`` counts as failed, with its message, and
+what it recorded before (``metrics.json``) still counts. The closed loop plans its own
+route (level 1), which may differ from the draw's: each record says whether it does and
+where the driven route turns back.
 
 The limits are issue 13's: driven curvature at most ``1 / min_turn_radius`` + 2 %, lateral
 acceleration at most ``mu * g`` + 5 % (the scenario's ``[trajectory]`` parameters), no
 collision, never off the road. Printed per network: routes run, arrived, within each limit,
 all four together, the median wall time per run and the worst value of each with its route;
-``-v`` a line per route. ``--json`` writes every route's record; ``--out`` keeps each run's
+``-v`` a line per route (with the speed where the curvature and the lateral acceleration
+peak). ``--json`` writes every route's record; ``--out`` keeps each run's
 folder (``metrics.json`` says why a run stopped).
 """
 
@@ -37,6 +41,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from benchmarks.routes import LONGEST, NETS, ROOT, random_routes
 
 #: Tolerances on the limits: curvature +2 %, lateral acceleration +5 % (issue 13).
@@ -47,6 +53,8 @@ BASE_DURATION = 60.0
 ROUTE_SPEED = 5.0
 #: Where the ego's front bumper starts along the start edge [m] (at most the edge's length).
 START_POS = 20.0
+#: Status of a route whose start edge is shorter than the car: no scenario can start there.
+NOT_RUN = "not run"
 #: The checks that make up the target, in print order.
 CHECKS = ("curvature_ok", "lateral_ok", "no_collision", "on_road")
 
@@ -115,30 +123,60 @@ def drive(sc: Any, net: Any, out: Path) -> dict[str, Any]:
         "on_road": off is not None and off <= 0.0,
     }
     rec["all_ok"] = all(rec[c] for c in CHECKS)
+    replans = [float(r["time"]) for r in m.get("replans") or ()]
+    rec["curvature_peak"] = _peak(out / "trajectory.csv", "curvature", replans)
+    rec["lateral_peak"] = _peak(out / "trajectory.csv", "a_lat", replans)
     return rec
+
+
+def _peak(csv: Path, column: str, replans: list[float]) -> dict[str, float | None] | None:
+    """Where the driven path's ``column`` peaks (absolute value): time [s], station [m],
+    speed [m/s] and the time since the last replan before it [s]."""
+    if not csv.exists():
+        return None
+    d = np.genfromtxt(csv, delimiter=",", names=True)
+    if d.size < 3:
+        return None
+    i = int(np.argmax(np.abs(d[column])))
+    t = float(d["t"][i])
+    before = [r for r in replans if r <= t]
+    return {"t": t, "station": float(d["station"][i]), "speed": float(d["speed"][i]),
+            "since_replan": t - before[-1] if before else None}
 
 
 def _fmt(x: Any, spec: str) -> str:
     return "-" if x is None else format(x, spec)
 
 
+def _at(peak: dict[str, float | None] | None) -> str:
+    return "" if peak is None else f" at {peak['speed']:.1f} m/s"
+
+
 def route_line(r: dict[str, Any]) -> str:
     """One line of ``-v``: a route's outcome and its maxima."""
+    if r["status"] == NOT_RUN:
+        return (f"  #{r['index']:02d} {r['from_edge']} -> {r['to_edge']} ({r['length']:.0f} m): "
+                f"{NOT_RUN}: {r['error']}")
     flags = " ".join(c for c in CHECKS if not r[c])
     why = r["error"] or ("" if r["arrived"] else r["reason"] or "")
     return (f"  #{r['index']:02d} {r['from_edge']} -> {r['to_edge']} ({r['length']:.0f} m): "
             f"{r['status']}, travel {_fmt(r['travel_time'], '.1f')} s, kappa "
-            f"{_fmt(r['max_curvature'], '.3f')} 1/m, a_lat "
-            f"{_fmt(r['max_lateral_acceleration'], '.2f')} m/s^2, collisions "
-            f"{_fmt(r['collisions'], 'd')}, off road {_fmt(r['time_off_road'], '.1f')} s, "
+            f"{_fmt(r['max_curvature'], '.3f')} 1/m{_at(r['curvature_peak'])}, a_lat "
+            f"{_fmt(r['max_lateral_acceleration'], '.2f')} m/s^2{_at(r['lateral_peak'])}, "
+            f"collisions {_fmt(r['collisions'], 'd')}, off road "
+            f"{_fmt(r['time_off_road'], '.1f')} s, "
             f"wall {r['wall_time']:.1f} s" + (f"; breaks: {flags}" if flags else "")
             + (f"; turns back {', '.join(r['turnarounds'])}" if r["turnarounds"] else "")
             + (f"; {why}" if why else ""))
 
 
 def summary(recs: list[dict[str, Any]]) -> dict[str, Any]:
-    """Counts, median wall time and the worst values (with their route) of one network."""
-    out: dict[str, Any] = {"routes": len(recs), "arrived": sum(r["arrived"] for r in recs),
+    """Counts, median wall time and the worst values (with their route) of one network,
+    over the routes run."""
+    drawn = len(recs)
+    recs = [r for r in recs if r["status"] != NOT_RUN]
+    out: dict[str, Any] = {"drawn": drawn, "not_run": drawn - len(recs), "routes": len(recs),
+                           "arrived": sum(r["arrived"] for r in recs),
                            "failed": sum(r["status"] == "failed" for r in recs)}
     for c in (*CHECKS, "all_ok"):
         out[c] = sum(bool(r[c]) for r in recs)
@@ -176,7 +214,9 @@ def summary_lines(name: str, s: dict[str, Any], limits: tuple[float, float]) -> 
 
     wall = s["median_wall_time"]
     return [
-        f"{name}: {n} routes run, arrived {share('arrived')}, failed {s['failed']}; within "
+        f"{name}: {s['drawn']} routes drawn"
+        + (f", {s['not_run']} not run (start edge shorter than the car)" if s["not_run"] else "")
+        + f"; {n} run, arrived {share('arrived')}, failed {s['failed']}; within "
         f"curvature 1/R + 2 % {share('curvature_ok')}, lateral acceleration mu g + 5 % "
         f"{share('lateral_ok')}, no collision {share('no_collision')}, never off the road "
         f"{share('on_road')}; all four {share('all_ok')}, arrived and all four "
@@ -207,12 +247,19 @@ def bench_network(name: str, path: Path, shortest: float, n_routes: int, seed: i
                                          "lateral_acceleration": limits[1]}, "routes": recs}
     t0 = time.perf_counter()
     for i, r in enumerate(random_routes(net, n_routes, seed, shortest)):
-        sc = route_scenario(base, net, i, r.from_edge, r.to_edge, r.length)
         planned = None if r.plan is None else list(r.plan.route.edges)
-        rec = {"index": i, "from_edge": r.from_edge, "to_edge": r.to_edge, "length": r.length,
-               "planned_feasible": None if r.plan is None else bool(r.plan.trajectory.feasible),
-               "route_planned": planned, **drive(sc, net, out / sc.name)}
-        rec["route_as_planned"] = rec["route_driven"] == planned
+        rec: dict[str, Any] = {
+            "index": i, "from_edge": r.from_edge, "to_edge": r.to_edge, "length": r.length,
+            "planned_feasible": None if r.plan is None else bool(r.plan.trajectory.feasible),
+            "route_planned": planned}
+        start_len = net.length_of(r.from_edge)
+        if start_len < base.ego.length:  # the closed loop needs the car on its start edge
+            rec.update(status=NOT_RUN, error=f"start edge '{r.from_edge}' ({start_len:.2f} m) "
+                       f"is shorter than the car ({base.ego.length} m)")
+        else:
+            sc = route_scenario(base, net, i, r.from_edge, r.to_edge, r.length)
+            rec.update(drive(sc, net, out / sc.name))
+            rec["route_as_planned"] = rec["route_driven"] == planned
         recs.append(rec)
         result["summary"] = summary(recs)
         save(result)
