@@ -4,11 +4,12 @@
 Random pairs of edges the passenger class may use, routed without turnarounds
 (:func:`splineplan.route.shortest_route`); kept when the route is 0.3-3 km long on the
 bundled networks and 0.5-3 km on Monaco (``../shared/data``, skipped when absent), and when
-the planned route needs no turnaround. ``splineplan.pipeline.plan`` plans each with its
-defaults and no obstacles. Printed per network: routes, feasible, those whose route takes a
-junction turn or an edge's bend that level 1 finds too tight for the car
-(``Route.tight_turns``, ``Route.tight_bends``) and feasible among the others, and the first
-limit each infeasible plan breaks.
+the planned route needs no turnaround (the draw of :mod:`benchmarks.routes`, which
+``bench_drive`` shares). ``splineplan.pipeline.plan`` plans each with its defaults and no
+obstacles. Printed per network: routes, feasible, those whose route takes a junction turn
+or an edge's bend that level 1 finds too tight for the car (``Route.tight_turns``,
+``Route.tight_bends``) and feasible among the others, and the first limit each infeasible
+plan breaks.
 """
 
 from __future__ import annotations
@@ -16,55 +17,32 @@ from __future__ import annotations
 import argparse
 import collections
 import logging
-import random
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
-NETS = {"city": (ROOT / "sumo_nets" / "city.net.xml", 300.0),
-        "grid": (ROOT / "sumo_nets" / "grid.net.xml", 300.0),
-        "monaco": (ROOT.parent / "shared" / "data" / "monaco.net.xml.gz", 500.0)}
-LONGEST = 3000.0
+from benchmarks.routes import LONGEST, NETS, random_routes
 
 
 def bench_network(path: Path, shortest: float, n_routes: int, seed: int) -> dict[str, int]:
     """Plan ``n_routes`` random routes on one network; print and return the counts."""
-    from splineplan.errors import SplineplanError
     from splineplan.network import load_network
-    from splineplan.pipeline import plan, turnarounds
-    from splineplan.route import shortest_route
 
     net = load_network(path)
-    rng = random.Random(seed)
-    usable = [e for e in net.edge_ids if net.allows(e, "passenger")]
     counts = collections.Counter[str]()
     broken = collections.Counter[str]()
     t0 = time.perf_counter()
-    tries = 0
-    while counts["routes"] < n_routes and tries < 500 * n_routes:
-        tries += 1
-        a, b = rng.choice(usable), rng.choice(usable)
-        try:
-            if not shortest <= shortest_route(net, a, b, turnarounds=False).length <= LONGEST:
-                continue
-        except SplineplanError:
-            continue
-        try:
-            p = plan(net, a, b)
-        except SplineplanError as err:
-            counts["routes"] += 1
-            broken[f"error ({type(err).__name__})"] += 1
-            continue
-        if turnarounds(net, p.route):
-            continue
+    for r in random_routes(net, n_routes, seed, shortest):
         counts["routes"] += 1
-        tight = bool(p.route.tight_turns or p.route.tight_bends)
+        if r.plan is None:
+            broken[f"error ({type(r.error).__name__})"] += 1
+            continue
+        tight = bool(r.plan.route.tight_turns or r.plan.route.tight_bends)
         counts["tight"] += tight
-        if p.trajectory.feasible:
+        if r.plan.trajectory.feasible:
             counts["feasible"] += 1
             counts["feasible_fit"] += not tight
         else:
-            v = p.trajectory.violations
+            v = r.plan.trajectory.violations
             broken[v[0].kind if v else "unknown"] += 1
     n, ok = counts["routes"], counts["feasible"]
     fit = n - counts["tight"]
