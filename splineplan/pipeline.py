@@ -37,7 +37,7 @@ from splineplan.network import CarShape, RoadNetwork, route_corridor
 from splineplan.obstacles import Obstacles
 from splineplan.planner import plan_corridor
 from splineplan.roadmap import Roadmap, RoadmapParams
-from splineplan.route import Route, is_turnaround, shortest_route
+from splineplan.route import Route, forward_route, is_turnaround
 from splineplan.trajectory import Trajectory, TrajectoryParams
 
 log = logging.getLogger(__name__)
@@ -139,8 +139,8 @@ def plan(
     while True:
         t0 = time.perf_counter()
         try:
-            route = _forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                                   avoid=avoided, start_pos=start_pos, car=car)
+            route = forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                                  avoid=avoided, start_pos=start_pos, car=car)
         except NoRouteError as err:
             if last is None:
                 raise
@@ -178,16 +178,3 @@ def turnarounds(network: RoadNetwork, route: Route) -> tuple[int, ...]:
     return tuple(i for i, (e, f) in enumerate(itertools.pairwise(route.edges))
                  if is_turnaround(network, e, f, route.vclass))
 
-
-def _forward_route(network: RoadNetwork, from_edge: str, to_edge: str, *, vclass: str,
-                   weight: str, avoid: Iterable[str], start_pos: float,
-                   car: CarShape | None = None) -> Route:
-    """The shortest route without turnarounds, or the shortest where every route has one;
-    without turns ``car`` cannot make where a route avoids them."""
-    try:
-        return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos, turnarounds=False, car=car)
-    except NoRouteError:
-        log.info("every route %s -> %s turns around: planning the shortest", from_edge, to_edge)
-        return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos, car=car)

@@ -198,6 +198,29 @@ def shortest_route(
                  start_pos=start_pos, tight_turns=turns, tight_bends=bent)
 
 
+
+def forward_route(
+    network: RoadNetwork,
+    from_edge: str,
+    to_edge: str,
+    *,
+    vclass: str = "passenger",
+    weight: str = "length",
+    avoid: Iterable[str] = (),
+    start_pos: float = 0.0,
+    car: CarShape | None = None,
+) -> Route:
+    """The route a planner that drives forward takes: :func:`shortest_route` without
+    turnarounds, or with them where every route has one (a dead end); the arguments as
+    there."""
+    try:
+        return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                              avoid=avoid, start_pos=start_pos, turnarounds=False, car=car)
+    except NoRouteError:
+        log.info("every route %s -> %s turns around: taking the shortest", from_edge, to_edge)
+        return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                              avoid=avoid, start_pos=start_pos, car=car)
+
 #: Routes :func:`_without_tight_turns` tries before it keeps the tight turns and bends.
 MAX_TIGHT_DETOURS = 16
 

@@ -136,7 +136,7 @@ class Driver(Replanning, Control):
     def route_from_scenario(self) -> None:
         """Check the ego's start and goal against the network and plan its route (level 1)."""
         from splineplan.network import route_corridor
-        from splineplan.route import shortest_route
+        from splineplan.route import forward_route
 
         sc, ego = self.sc, self.sc.ego
         self.net.edge_index(ego.start_edge)
@@ -152,8 +152,8 @@ class Driver(Replanning, Control):
             raise ScenarioError(f"{sc.name}: ego.start_pos ({ego.start_pos} m) must be at least "
                                 f"the ego's length ({ego.length} m): the position is the front "
                                 "bumper's")
-        route = shortest_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
-                               start_pos=ego.start_pos, car=self.car)
+        route = forward_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
+                              start_pos=ego.start_pos, car=self.car)
         goal_len = self.net.length_of(ego.goal_edge)
         if ego.goal_pos is not None and ego.goal_pos > goal_len:
             raise ScenarioError(f"{sc.name}: ego.goal_pos {ego.goal_pos} m is beyond the end of "
@@ -164,11 +164,11 @@ class Driver(Replanning, Control):
     def route_from_sumo(self) -> None:
         """Plan the route (level 1) from where SUMO inserted the vehicle to its goal."""
         from splineplan.network import route_corridor
-        from splineplan.route import shortest_route
+        from splineplan.route import forward_route
 
         ego = self.sc.ego
-        route = shortest_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
-                               start_pos=ego.start_pos, car=self.car)
+        route = forward_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
+                              start_pos=ego.start_pos, car=self.car)
         self._set_route(route_corridor(self.net, route, vclass=ego.vclass), route.edges)
         self.route_length = route.length
 

@@ -470,7 +470,7 @@ class Replanning(Perception):
     def _reroute(self, err: RoadBlockedError) -> tuple[bool, Any]:
         """Level 1 again with the blocked edge avoided. Returns (done, detail or error)."""
         from splineplan.network import route_corridor
-        from splineplan.route import route_length, shortest_route
+        from splineplan.route import forward_route, route_length
 
         ego = self.sc.ego
         assert self.corridor is not None
@@ -483,8 +483,8 @@ class Replanning(Perception):
         start = float(self.corridor.edge_starts[self.corridor.edges.index(here)])
         pos = min(max(self.station - start + ego.length / 2.0, 0.0), self.net.length_of(here))
         try:
-            route = shortest_route(self.net, here, ego.goal_edge, vclass=ego.vclass,
-                                   avoid=self.avoid, start_pos=pos, car=self.car)
+            route = forward_route(self.net, here, ego.goal_edge, vclass=ego.vclass,
+                                  avoid=self.avoid, start_pos=pos, car=self.car)
             corridor = route_corridor(self.net, route, vclass=ego.vclass)
         except (NoRouteError, GeometryError) as e:
             return False, RoadBlockedError(f"{err}; no other route: {e}", station=err.station,
