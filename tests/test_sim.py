@@ -171,6 +171,24 @@ def test_driven_path_matches_sumo_record(runs: dict[str, SimResult]) -> None:
     assert worst < 0.01  # FCD rounds to 2 decimals
 
 
+def test_a_closure_found_from_inside_the_junction_before_it_is_driven_to(
+        monaco_net: Path, tmp_path: Path) -> None:
+    """Monaco, -1362#1 to --427879: level 2 finds the hairpin into edge 1376#2 closed when
+    the ego's front is already in the junction towards it, where SUMO has the vehicle on
+    the internal lane to 1376#2 and refuses a new route that leaves it (the run failed:
+    "Route replacement failed ... junction-internal edge leading elsewhere"). The ego
+    keeps its way into 1376#2, re-routes from there, and arrives."""
+    sc = load_scenario(SCENARIOS / "monaco.toml")
+    ego = dataclasses.replace(sc.ego, start_edge="-1362#1", goal_edge="--427879",
+                              start_pos=20.0, start_lane=0)
+    sc = dataclasses.replace(sc, ego=ego, egos=(ego,),
+                             sim=dataclasses.replace(sc.sim, duration=600.0))
+    r = simulate(sc, out_dir=tmp_path, progress=False)
+    assert r.status == "arrived", r.reason
+    assert "1376#2" in r.metrics["route"]
+    assert r.metrics["collisions"] == 0
+
+
 def test_blocked_road_reroutes(runs: dict[str, SimResult]) -> None:
     r = runs["blocked_road"]
     reroutes = [p for p in r.replans if p.reason == "reroute"]

@@ -478,9 +478,18 @@ class Replanning(Perception):
         here = self.corridor.edge_at(self.station)
         if blocked is None or blocked == here or blocked in self.avoid:
             return False, err
-        self.avoid.add(blocked)
         assert here is not None
         start = float(self.corridor.edge_starts[self.corridor.edges.index(here)])
+        ahead = self.corridor.edges[self.corridor.edges.index(here) + 1:]
+        if (ahead and ahead[0] == blocked
+                and self.station + ego.length / 2.0 > start + self.net.length_of(here)):
+            # the front is in the junction towards the closed edge: SUMO has the vehicle on
+            # the internal lane there and keeps it on its way (it refuses a route that
+            # leaves it); stop before the closure instead
+            return False, RoadBlockedError(f"{err}; the vehicle is already in the junction "
+                                           f"towards edge '{blocked}'", station=err.station,
+                                           edge=blocked)
+        self.avoid.add(blocked)
         pos = min(max(self.station - start + ego.length / 2.0, 0.0), self.net.length_of(here))
         try:
             route = forward_route(self.net, here, ego.goal_edge, vclass=ego.vclass,
