@@ -196,9 +196,11 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
             hi_f = np.maximum(centre + half, intervals[first:, 1])
             centre = np.clip(centre, lo_f, hi_f)
             half = np.minimum(centre - lo_f, hi_f - centre)
+        lo, hi = _lead_in_bands(centre - half, centre + half, start, origin, normal,
+                                intervals[first:], vst[first:] - s0 < lead)
         lat = min_turning_offsets(
             np.vstack((start, heading_point, origin)), np.vstack((np.zeros((2, 2)), normal)),
-            np.concatenate((fixed, centre - half)), np.concatenate((fixed, centre + half)),
+            np.concatenate((fixed, lo)), np.concatenate((fixed, hi)),
             np.concatenate((fixed, centre)), SMOOTH_CENTRE_WEIGHT, params.kappa_max)[2:]
         verts = verts.copy()
         verts[first:] = origin + lat[:, None] * normal
@@ -232,6 +234,21 @@ def _control_points(roadmap: Roadmap, corridor: Corridor, start_heading: float |
     counts = (~old).astype(np.int64)
     counts[np.flatnonzero(old)[kept]] = 1
     return pool, counts
+
+
+def _lead_in_bands(lo: FloatArray, hi: FloatArray, start: FloatArray, origin: FloatArray,
+                   normal: FloatArray, free: FloatArray, near: NDArray[np.bool_]
+                   ) -> tuple[FloatArray, FloatArray]:
+    """The bands ``lo``, ``hi`` ``(m,)`` [m] of the vertices, those within the lead-in
+    (``near``) widened to the vehicle's own offset on their sweep lines, within their free
+    intervals ``free`` ``(m, 2)``: the least-bending polygon then leaves the lateral
+    position the vehicle has over the lead-in, as the first control polygon does, instead
+    of swinging to level 2's path within a few metres (too sharp for the speed a closed
+    loop replans at)."""
+    if not np.any(near):
+        return lo, hi
+    own = np.clip(np.einsum("ij,ij->i", start[None, :] - origin, normal), free[:, 0], free[:, 1])
+    return (np.where(near, np.minimum(lo, own), lo), np.where(near, np.maximum(hi, own), hi))
 
 
 # ---- least bending ---------------------------------------------------------------------

@@ -380,12 +380,19 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
             other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                                end_speed, True, frame, keep_turns=True, free=True)
             traj = _less_violating(traj, other, params)
-    if not traj.feasible and polish:
+    if polish and (not traj.feasible or _slowed(traj, start_speed)):
         other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
                            end_speed, not smooth, frame)
-        log.debug("first control polygon gives no feasible curve; the other: %s",
-                  other.feasible)
-        traj = _less_violating(traj, other, params)
+        if not traj.feasible:
+            log.debug("first control polygon gives no feasible curve; the other: %s",
+                      other.feasible)
+            traj = _less_violating(traj, other, params)
+        else:
+            log.debug("first control polygon's curve starts at %.1f m/s, below the start "
+                      "speed; the other polygon's (feasible %s) at %.1f m/s",
+                      float(traj.speed[0]), other.feasible, float(other.speed[0]))
+            if other.feasible and float(other.speed[0]) > float(traj.speed[0]):
+                traj = other
     if (traj.feasible or not polish or params.detour_rate <= 0
             or not _steep(roadmap, params.detour_rate)):
         return traj
@@ -435,6 +442,18 @@ def _less_violating(first: Trajectory, other: Trajectory, params: TrajectoryPara
             _violation(first, params) <= _violation(other, params))):
         return first
     return other
+
+
+def _slowed(tr: Trajectory, start_speed: float) -> bool:
+    """Whether the curve makes the vehicle start more than :data:`SLOW_START` slower than
+    it drives (its first bend too sharp for the speed, within less than the braking
+    distance): no vehicle can, and a closed loop would have to brake hard."""
+    return float(tr.speed[0]) < start_speed - SLOW_START
+
+
+#: Shortfall [m/s] of a curve's first speed below the start speed at which
+#: :func:`_plan_polygons` tries the other control polygon too.
+SLOW_START = 0.5
 
 
 def _too_sharp(tr: Trajectory, params: TrajectoryParams) -> bool:

@@ -192,6 +192,37 @@ def test_empty_road_off_centre_start_changes_lane_smoothly() -> None:
     assert shapely_violations(tr, road, Obstacles.empty(), rm.params) == (0, 0)
 
 
+def bend_ahead(width: float, radius: float, straight: float) -> Corridor:
+    """A road of ``width`` [m]: ``straight`` [m] along +x, a left bend of ``radius`` [m]
+    by 90 degrees, 40 m on."""
+    run = np.column_stack((np.arange(0.0, straight + 0.25, 0.5), np.zeros(int(straight * 2) + 1)))
+    th = np.linspace(0.0, np.pi / 2.0, 60)[1:]
+    arc = np.column_stack((straight + radius * np.sin(th), radius * (1.0 - np.cos(th))))
+    up = np.column_stack((np.full(40, straight + radius), radius + np.arange(1.0, 41.0)))
+    ref = np.vstack((run, arc, up))
+    return Corridor.from_reference(ref, np.full(len(ref), width / 2.0),
+                                   np.full(len(ref), -width / 2.0))
+
+
+@pytest.mark.parametrize(("width", "straight", "lateral", "speed"),
+                         [(3.2, 40.0, 0.3, 13.89), (3.2, 70.0, 0.3, 10.0),
+                          (6.4, 40.0, 0.6, 13.89)])
+def test_a_plan_at_speed_beside_level_2s_path_starts_at_that_speed(
+        width: float, straight: float, lateral: float, speed: float) -> None:
+    """A vehicle at speed a little beside level 2's path, a sharp bend ahead (a closed
+    loop's replan at its horizon): the curve leaves the vehicle's offset gently enough
+    for the wheels to follow at that speed, instead of swinging onto the path within a
+    few metres and asking the vehicle to start at a third of its speed (before: 4.0-6.5
+    m/s). The bend ahead is driven within the turning limit."""
+    road = bend_ahead(width, 8.0, straight)
+    rm = plan_roadmap(road, Obstacles.empty(), np.array([2.0, lateral]))
+    tr = plan_trajectory(rm, road, Obstacles.empty(), TP, 0.0, start_speed=speed)
+    assert tr.feasible
+    assert tr.speed[0] == pytest.approx(speed)
+    assert_wheels_keep_up(tr)
+    assert np.abs(tr.curvature).max() <= TP.kappa_max + 1e-9
+
+
 def test_one_obstacle_real_roadmap() -> None:
     road = straight_road(150.0, 9.6)
     obstacles = Obstacles.from_boxes(np.array([[60.0, -3.0]]), 0.0, 4.5, 1.8)
