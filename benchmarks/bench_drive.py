@@ -221,8 +221,8 @@ def summary_lines(name: str, s: dict[str, Any], limits: tuple[float, float]) -> 
         f"{share('lateral_ok')}, no collision {share('no_collision')}, never off the road "
         f"{share('on_road')}; all four {share('all_ok')}, arrived and all four "
         f"{share('arrived_all_ok')}; median wall {_fmt(wall, '.1f')} s per run",
-        f"  driven route not the planned one: {s['not_as_planned']}; it turns back (the closed "
-        f"loop's level 1 allows turnarounds): {s['turning_back']}, all four among the other "
+        f"  driven route not the planned one (a re-route): {s['not_as_planned']}; it turns "
+        f"back: {s['turning_back']}, all four among the other "
         f"{n - s['turning_back']}: {s['forward_all_ok']}",
         f"  worst: curvature {worst('max_curvature', '.3f', ' 1/m')} (limit {limits[0]:.3f}), "
         f"lateral acceleration {worst('max_lateral_acceleration', '.2f', ' m/s^2')} (limit "
