@@ -1529,7 +1529,7 @@ def bend_fits(network: RoadNetwork, edge_id: str, vclass: str, car: CarShape) ->
     """Whether ``car`` can follow the bends of edge ``edge_id`` within its allowed lanes,
     once per network and car.
 
-    Networks made from OpenStreetMap draw some bends of narrow streets as kinks of 60
+    Networks made from OpenStreetMap draw some bends of narrow streets as kinks of 70
     degrees or more between straight pieces, which no car of the turning radius can follow
     inside a lane of 3.2 m. A cheap test, not a search: for each run of vertices turning
     one way (:func:`_bend_runs`) by more than :data:`FIT_STRAIGHT` that would not fit a
@@ -1538,8 +1538,8 @@ def bend_fits(network: RoadNetwork, edge_id: str, vclass: str, car: CarShape) ->
     :data:`BEND_LEAD` before the run to as far after it) within the room the car's swept
     width leaves on the allowed lanes must turn within :data:`BEND_SLACK` times the
     turning limit. A run within :data:`BEND_LEAD` of the edge's ends is given the benefit:
-    the junction beside it may give the room. On Monaco's 944 runs that the test looks at,
-    it agrees with the kinematic oracle on 870 (``benchmarks/RESULTS.md``).
+    the junction beside it may give the room. On Monaco's 1,001 runs that the test
+    looks at, it agrees with the kinematic oracle on 901 (``benchmarks/RESULTS.md``).
     """
     key = ("bend", edge_id, vclass, repr(car))
     if key not in network._bands:

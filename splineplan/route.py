@@ -198,7 +198,6 @@ def shortest_route(
                  start_pos=start_pos, tight_turns=turns, tight_bends=bent)
 
 
-
 def forward_route(
     network: RoadNetwork,
     from_edge: str,
@@ -220,6 +219,7 @@ def forward_route(
         log.info("every route %s -> %s turns around: taking the shortest", from_edge, to_edge)
         return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
                               avoid=avoid, start_pos=start_pos, car=car)
+
 
 #: Routes :func:`_without_tight_turns` tries before it keeps the tight turns and bends.
 MAX_TIGHT_DETOURS = 16
