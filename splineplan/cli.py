@@ -159,7 +159,7 @@ _PLAN_OUTPUTS = ("plan.json", "trajectory.csv",
                  *(f"{n}.{fmt}" for n in ("roadmap", "trajectory", "speed")
                    for fmt in ("png", "pdf", "svg")))
 #: What ``simulate`` writes into its folder.
-_SIM_OUTPUTS = ("metrics.json", "trajectory.csv", "fcd.xml", "sumo.log", "run.log",
+_SIM_OUTPUTS = ("metrics.json", "trajectory.csv", "fcd.xml", "ssm.xml", "sumo.log", "run.log",
                 "summary.json", "tripinfo.xml", "*/metrics.json", "*/trajectory.csv",
                 *(f"{n}.{fmt}" for n in ("route", "speed_time") for fmt in ("png", "pdf", "svg")),
                 "plans/plan_*.png")
@@ -389,9 +389,9 @@ def _add_simulate(sub: argparse._SubParsersAction) -> None:
         description="Run a scenario (TOML, see scenarios/; or SUMO's own: a .sumocfg, or "
                     "--net with --routes) in SUMO with the planner driving the ego "
                     "vehicle(s), or a chosen set of SUMO's vehicles (--vehicles, --vtype, "
-                    "--share); write metrics.json, trajectory.csv and fcd.xml (per planned "
-                    "vehicle in <out>/<id>/, with summary.json and tripinfo.xml, when "
-                    "more than one vehicle is planned).")
+                    "--share); write metrics.json, trajectory.csv, fcd.xml and ssm.xml "
+                    "(per planned vehicle in <out>/<id>/, with summary.json and "
+                    "tripinfo.xml, when more than one vehicle is planned).")
     p.add_argument("scenario", nargs="?", default=None,
                    help="scenario file (.toml) or SUMO configuration (.sumocfg)")
     p.add_argument("--net", default=None, help="SUMO network (instead of a scenario file)")

@@ -34,7 +34,8 @@ do not see it (with two stopped cars closing two of three lanes and fast traffic
 third, a car passed the ego with 0.05 m to spare lane-based, 0.96 m with sublanes).
 
 Outputs in ``out_dir``: ``metrics.json``, ``trajectory.csv`` (the driven path), ``fcd.xml``
-(SUMO's floating car data), ``sumo.log``, and with ``plot=True`` pictures. A run that fails
+(SUMO's floating car data), ``ssm.xml`` (SUMO's surrogate safety measures,
+:mod:`splineplan.sumo.ssm`), ``sumo.log``, and with ``plot=True`` pictures. A run that fails
 midway writes all it has recorded, says why in ``metrics.json`` and raises
 :class:`~splineplan.errors.SimulationError`.
 """

@@ -37,8 +37,8 @@ SHARES = (0.0, 0.1, 0.25, 0.5, 1.0)
 COLUMNS = ("index", "name", "share", "seed", "status", "reason", "error", "planned",
            "planned_arrived", "collisions", "time_off_road", "teleports", "vehicles",
            "arrived", "mean_travel_time", "mean_time_loss", "mean_travel_time_planned",
-           "mean_travel_time_others", "throughput", "min_ttc", "min_gap", "min_gap_planned",
-           "sim_time", "wall_time", "run_dir")
+           "mean_travel_time_others", "throughput", "min_ttc", "sumo_ssm_min_ttc", "min_gap",
+           "min_gap_planned", "sim_time", "wall_time", "run_dir")
 #: Columns that are wall-clock times (they differ between runs of the same point).
 TIMING_FIELDS = ("wall_time", "process_wall_time")
 #: What the summary and the figure compare between shares.
@@ -189,6 +189,7 @@ def _row_metrics(summary: Mapping[str, Any], run_dir: Path) -> dict[str, Any]:
         "throughput": (3600.0 * sum(1 for t in trips if t["arrived"]) / sim_time
                        if sim_time > 0 else None),
         "min_ttc": pair_value("min_ttc"),
+        "sumo_ssm_min_ttc": pair_value("sumo_ssm_min_ttc"),  # SUMO's SSM device's, beside
         "min_gap": pair_value("min_gap"),
         "min_gap_planned": pair_value("min_gap_planned"),
         "sim_time": sim_time,

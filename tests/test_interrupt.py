@@ -1,7 +1,7 @@
 """Ctrl-C (SIGINT) on the real commands, as separate processes: the run folder keeps a
-record that reads (metrics.json says "interrupted", trajectory.csv and SUMO's fcd.xml are
-complete files, ``splineplan plot`` draws it), and ``bench`` stops at once and writes the
-runs that finished."""
+record that reads (metrics.json says "interrupted", trajectory.csv and SUMO's fcd.xml and
+ssm.xml are complete files, ``splineplan plot`` draws it), and ``bench`` stops at once and
+writes the runs that finished."""
 
 from __future__ import annotations
 
@@ -73,6 +73,13 @@ def _check_run_folder(run: Path) -> dict[str, object]:
         assert steps or m["sim_time_end"] == 0.0, m
         if steps:
             assert float(steps[-1].get("time", "nan")) <= m["sim_time_end"] + 1e-6
+    if (run / "ssm.xml").is_file():  # SUMO's SSM device: closed by SUMO, complete XML too
+        root = ET.parse(run / "ssm.xml").getroot()
+        assert root.tag == "SSMLog"
+        # what it logged ends by the time reached, and metrics.json has read it
+        ends = [float(c.get("end", "nan")) for c in root.iter("conflict")]
+        assert all(e <= m["sim_time_end"] + 1e-6 for e in ends), (ends, m)
+        assert m["sumo_ssm_conflicts"] <= len(ends)
     plot = subprocess.run([sys.executable, "-m", "splineplan.cli", "plot", str(run)],
                           cwd=ROOT, capture_output=True, text=True, timeout=120, check=False)
     assert plot.returncode == 0, plot.stderr

@@ -23,7 +23,7 @@ import os
 import sys
 import time
 import xml.etree.ElementTree as ET
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
@@ -47,6 +47,7 @@ from splineplan.errors import (
     SplineplanError,
 )
 from splineplan.scenario import Scenario
+from splineplan.sumo import ssm
 from splineplan.sumo.world import SumoError, World, sumo_message
 from splineplan.traffic import RoadCheck
 
@@ -117,9 +118,10 @@ def simulate(
         SUMO failed to start or to step, or the ego left the simulation unplanned; with
         ``gui=True``, no display to show ``sumo-gui`` on (checked before anything starts).
     Interrupted
-        Ctrl-C (``KeyboardInterrupt``) during the run: SUMO is closed (``fcd.xml`` complete),
-        ``trajectory.csv`` and ``metrics.json`` (status ``interrupted``, the time reached)
-        are written, no pictures; the exception's ``result`` is the :class:`SimResult`.
+        Ctrl-C (``KeyboardInterrupt``) during the run: SUMO is closed (``fcd.xml`` and
+        ``ssm.xml`` complete), ``trajectory.csv`` and ``metrics.json`` (status
+        ``interrupted``, the time reached) are written, no pictures; the exception's
+        ``result`` is the :class:`SimResult`.
     """
     if seed is not None:
         scenario = scenario.with_seed(seed)
@@ -277,6 +279,11 @@ class _Run:
                  "--log", str(self.out / "sumo.log"), "--error-log", str(self.out / "sumo.log"),
                  "--no-warnings", "true",
                  "--no-step-log", "true", "--duration-log.disable", "true"]
+        # SUMO's surrogate safety measures: with several planned vehicles for every vehicle
+        # (the run's pairs), for a single ego for the ego only (every vehicle would double
+        # SUMO's time among the city's traffic; the ego's alone costs nothing measurable)
+        args += ssm.ssm_options(self.out / ssm.FILE,
+                                None if self.multi else [d.ego for d in self.drivers])
         if self.multi:
             args += ["--tripinfo-output", str(self.out / "tripinfo.xml")]
         if sc.sumo_config is None:  # (a configuration names its own files)
@@ -531,6 +538,8 @@ class _Run:
                            self.world.seconds, d.plan_seconds)
         driven = driven_columns(d.rows)
         metrics = vehicle_metrics(d, driven, totals)
+        if not self.multi:  # (with several, they are the run's: summary.json)
+            metrics.update(self._sumo_ssm({d.ego}))
         out = d.out if d.out is not None else self.out
         write_vehicle(out, driven, metrics)
         return SimResult(d.status, d.reason, out, metrics, tuple(d.replans),
@@ -543,13 +552,30 @@ class _Run:
         summary = run_summary(self, results)
         fcd = self.out / "fcd.xml"
         if fcd.is_file() and self.status != "interrupted":
+            pairs: dict[str, Any] = {}
             try:
-                summary["pairs"] = pair_safety(fcd, self.sizes, results)
+                pairs.update(pair_safety(fcd, self.sizes, results))
             except Exception as err:  # an FCD cut short (SUMO failed): no pair figures
                 log.warning("no pairwise gaps from %s: %s", fcd, err)
+            pairs.update(self._sumo_ssm(results))  # SUMO's own, beside ours
+            if pairs:
+                summary["pairs"] = pairs
         write_json(self.out / "summary.json", summary)
         return SimResult(summary["status"], summary["reason"], self.out, summary, (), (),
                          {}, (), vehicles=results)
+
+
+    def _sumo_ssm(self, planned: Iterable[str]) -> dict[str, Any]:
+        """SUMO's surrogate safety measures from the run's ``ssm.xml`` (none where SUMO did
+        not write it, or not completely)."""
+        path = self.out / ssm.FILE
+        if not path.is_file():
+            return {}
+        try:
+            return ssm.read_ssm(path, planned)
+        except (OSError, ValueError, ET.ParseError) as err:
+            log.warning("no surrogate safety measures from %s: %s", path, err)
+            return {}
 
 
 def _vehicle_dir(out: Path, vid: str) -> Path:
