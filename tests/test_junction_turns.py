@@ -72,6 +72,22 @@ def test_level_1_knows_the_city_turns_no_car_can_make(a: str, b: str) -> None:
     assert not turn_fits(net, a, b, "passenger", CarShape())
 
 
+def test_level_1_keeps_a_city_turn_a_driver_makes_turning_in_early() -> None:
+    """B2A2 -> A2A3, a sharp turn that the oracle drives inside the turn's paving: level 1
+    lets the car reach the junction already turning in (or swung out), finds that it fits
+    and keeps it (it routed round it before), and the planner plans it feasibly on the
+    paving."""
+    net, builder, _ = _net("city")
+    turn = builder.turn("B2A2", "A2A3")
+    assert drive(turn.window, [], turn.start, turn.goal, margin=0.0, search=SEARCH).found
+    assert turn_fits(net, "B2A2", "A2A3", "passenger", CarShape())
+    p = plan(net, "B2A2", "A2A3", start_pos=turn.start_pos, start_xy=turn.start[:2],
+             start_heading=turn.start[2])
+    tr = p.trajectory
+    assert p.route.edges == ("B2A2", "A2A3") and tr.feasible
+    assert outside(turn, np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.heading)) <= TOL
+
+
 def _tight_network(tmp: Path) -> Path:
     """A network where the shortest route from xa to cg turns left by 145 degrees from one
     lane into another at a junction of nothing else (ab -> bc at b), and a longer route
