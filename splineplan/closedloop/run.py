@@ -61,6 +61,9 @@ log = logging.getLogger(__name__)
 LATERAL_RESOLUTION = 0.4
 #: At most this many plans are drawn with ``plot=True``.
 MAX_PLAN_PICTURES = 40
+#: Warnings of one kind that a run with several planned vehicles writes to ``sumo.log`` in
+#: full; SUMO counts the rest (``--aggregate-warnings``).
+AGGREGATE_WARNINGS = 50
 
 
 def simulate(
@@ -285,7 +288,12 @@ class _Run:
         args += ssm.ssm_options(self.out / ssm.FILE,
                                 None if self.multi else [d.ego for d in self.drivers])
         if self.multi:
-            args += ["--tripinfo-output", str(self.out / "tripinfo.xml")]
+            args += ["--tripinfo-output", str(self.out / "tripinfo.xml"),
+                     # a warning SUMO repeats every step (the SSM devices at a junction
+                     # whose internal lanes it finds no crossing for: 60,000 lines in five
+                     # minutes of the city's traffic) is written AGGREGATE_WARNINGS times,
+                     # then counted at the end
+                     "--aggregate-warnings", str(AGGREGATE_WARNINGS)]
         if sc.sumo_config is None:  # (a configuration names its own files)
             if sc.routes:
                 args += ["-r", ",".join(str(p) for p in sc.routes)]
