@@ -36,29 +36,16 @@ def bench(path: Path, cache: dict[str, bool], verbose: bool) -> dict[str, int]:
     from shapely.ops import substring, unary_union
 
     import splineplan.network as nw
-    from splineplan.geometry import dedupe_polyline, polyline_stations
 
     net = nw.load_network(path)
     car = nw.CarShape()
-    radius = car.min_turn_radius
-    swept = math.hypot(radius + car.width / 2.0, car.length / 2.0) - (radius - car.width / 2.0)
     counts = {"runs": 0, "drivable": 0, "agree": 0, "refused": 0, "passed": 0}
     t0 = time.perf_counter()
     for edge in net.edge_ids:
         lanes = [ln for ln in net.lanes_of(edge) if ln.allows("passenger")]
-        if not lanes:
-            continue
-        ref = dedupe_polyline(lanes[0].shape)
-        if len(ref) < 3:
-            continue
-        st = polyline_stations(ref)
-        play = sum(ln.width for ln in lanes) - swept
+        ref, st, runs = nw.sharp_runs(lanes, car)
         area = None
-        for first, last, turn in nw._bend_runs(ref):
-            if abs(turn) < nw.FIT_STRAIGHT or nw._kink_radius(play, abs(turn)) >= 2 * radius:
-                continue
-            if st[first] < nw.BEND_LEAD or st[-1] - st[last] < nw.BEND_LEAD:
-                continue
+        for first, last, turn in runs:
             key = f"{path.name}:{edge}:{first}:{last}"
             if key not in cache:
                 line = LineString(ref)

@@ -40,6 +40,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from splineplan.control_polygon import SMOOTH_CENTRE_WEIGHT, min_turning_offsets, polygon_turns
 from splineplan.corridor import UNBOUNDED, Corridor
 from splineplan.errors import (
     GeometryError,
@@ -1341,6 +1342,18 @@ class CarShape:
                 raise ParameterError(f"CarShape.{name} must be a positive number of metres, "
                                      f"got {value!r}")
 
+    @property
+    def outer_reach(self) -> float:
+        """How far [m] the footprint reaches outside the centre's arc on the turning
+        radius (its outer front corner)."""
+        radius = self.min_turn_radius
+        return math.hypot(radius + self.width / 2.0, self.length / 2.0) - radius
+
+    @property
+    def swept_width(self) -> float:
+        """Width [m] of the band the footprint sweeps on the turning radius."""
+        return self.outer_reach + self.width / 2.0
+
 
 #: Turns whose internal lanes bend on no radius below this many turning radii, and whose
 #: lanes are wider than the car's swept width, are made without a test (see
@@ -1391,7 +1404,7 @@ def _turn_fits(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
         return True
     pairs = sorted({(c.from_lane, c.to_lane) for c in conns})
     radius = car.min_turn_radius
-    swept = math.hypot(radius + car.width / 2.0, car.length / 2.0) - (radius - car.width / 2.0)
+    swept = car.swept_width
     turn = 0.0
     for c in conns:
         via = _via_shape(network, c.via)
@@ -1540,21 +1553,18 @@ def _any_path_paved(paths: list[FloatArray], paving: tuple[FloatArray, FloatArra
     return any(bool(per_pose[a:b].all()) for a, b in itertools.pairwise(at))
 
 
-
 def bend_fits(network: RoadNetwork, edge_id: str, vclass: str, car: CarShape) -> bool:
     """Whether ``car`` can follow the bends of edge ``edge_id`` within its allowed lanes,
     once per network and car.
 
     Networks made from OpenStreetMap draw some bends of narrow streets as kinks of 70
     degrees or more between straight pieces, which no car of the turning radius can follow
-    inside a lane of 3.2 m. A cheap test, not a search: for each run of vertices turning
-    one way (:func:`_bend_runs`) by more than :data:`FIT_STRAIGHT` that would not fit a
-    single kink of that turn (:func:`_kink_radius`), the polygon of least turning
+    inside a lane of 3.2 m. A cheap test, not a search: for each sharp run of vertices
+    turning one way (:func:`sharp_runs`), the polygon of least turning
     (:func:`~splineplan.control_polygon.min_turning_offsets`, points every metre from
     :data:`BEND_LEAD` before the run to as far after it) within the room the car's swept
     width leaves on the allowed lanes must turn within :data:`BEND_SLACK` times the
-    turning limit. A run within :data:`BEND_LEAD` of the edge's ends is given the benefit:
-    the junction beside it may give the room. On Monaco's 1,001 runs that the test
+    turning limit. On Monaco's 1,001 runs that the test
     looks at, it agrees with the kinematic oracle on 901 (``benchmarks/RESULTS.md``).
     """
     key = ("bend", edge_id, vclass, repr(car))
@@ -1580,25 +1590,33 @@ BEND_STEP = 1.0
 
 def _bend_fits(network: RoadNetwork, edge_id: str, vclass: str, car: CarShape) -> bool:
     lanes = [ln for ln in network.lanes_of(edge_id) if ln.allows(vclass)]
-    if not lanes:
-        return True
-    ref = dedupe_polyline(lanes[0].shape)
-    if len(ref) < 3:
-        return True
-    st = polyline_stations(ref)
-    radius = car.min_turn_radius
-    swept = math.hypot(radius + car.width / 2.0, car.length / 2.0) - (radius - car.width / 2.0)
-    play = sum(ln.width for ln in lanes) - swept
-    for first, last, turn in _bend_runs(ref):
-        if abs(turn) < FIT_STRAIGHT or _kink_radius(play, abs(turn)) >= 2.0 * radius:
-            continue
-        if st[first] < BEND_LEAD or st[-1] - st[last] < BEND_LEAD:
-            continue  # beside a junction: the benefit of the doubt
+    ref, st, runs = sharp_runs(lanes, car)
+    for first, last, turn in runs:
         if not _run_fits(ref, st, lanes, float(st[first]), float(st[last]), turn, car):
             log.debug("edge '%s': the bend of %.0f degrees at %.0f m is too tight for %s",
                       edge_id, np.degrees(abs(turn)), st[first], car)
             return False
     return True
+
+
+def sharp_runs(lanes: list[Lane], car: CarShape
+               ) -> tuple[FloatArray, FloatArray, list[tuple[int, int, float]]]:
+    """The runs of an edge's bends that :func:`bend_fits` tests, from its allowed
+    ``lanes``: the rightmost one's centre line ``(n, 2)`` [m], its stations ``(n,)`` [m],
+    and the runs of :func:`_bend_runs` that turn by more than :data:`FIT_STRAIGHT`, would
+    not fit a single kink of their turn at twice the turning radius
+    (:func:`_kink_radius`), and lie at least :data:`BEND_LEAD` from the edge's ends
+    (beside a junction the junction may give the room: the benefit of the doubt)."""
+    ref = dedupe_polyline(lanes[0].shape) if lanes else np.zeros((0, 2))
+    if len(ref) < 3:
+        return ref, np.zeros(len(ref)), []
+    st = polyline_stations(ref)
+    play = sum(ln.width for ln in lanes) - car.swept_width
+    runs = [(first, last, turn) for first, last, turn in _bend_runs(ref)
+            if abs(turn) >= FIT_STRAIGHT
+            and _kink_radius(play, abs(turn)) < 2.0 * car.min_turn_radius
+            and st[first] >= BEND_LEAD and st[-1] - st[last] >= BEND_LEAD]
+    return ref, st, runs
 
 
 def _run_fits(ref: FloatArray, st: FloatArray, lanes: list[Lane], s_first: float,
@@ -1608,12 +1626,6 @@ def _run_fits(ref: FloatArray, st: FloatArray, lanes: list[Lane], s_first: float
     BEND_LEAD`` [m], moved sideways within the room the car's swept width leaves on the
     allowed ``lanes``, turns within ``BEND_SLACK`` times the turning limit. ``turn``
     [rad]: the run's heading change (its sign says which side is outside)."""
-    from splineplan.control_polygon import (
-        SMOOTH_CENTRE_WEIGHT,
-        min_turning_offsets,
-        polygon_turns,
-    )
-
     s = np.arange(s_first - BEND_LEAD, s_last + BEND_LEAD + 1e-9, BEND_STEP)
     i = np.clip(np.searchsorted(st, s, side="right") - 1, 0, len(st) - 2)
     d = ref[i + 1] - ref[i]
@@ -1622,14 +1634,13 @@ def _run_fits(ref: FloatArray, st: FloatArray, lanes: list[Lane], s_first: float
     width = sum(ln.width for ln in lanes)
     # points on the middle of the allowed lanes (the rightmost one's centre moved left)
     origin = ref[i] + (s - st[i])[:, None] * d + (width - lanes[0].width) / 2.0 * normal
-    radius = car.min_turn_radius
-    outer = width / 2.0 - (math.hypot(radius + car.width / 2.0, car.length / 2.0) - radius)
+    outer = width / 2.0 - car.outer_reach
     inner = width / 2.0 - car.width / 2.0
     lo, hi = (-outer, inner) if turn > 0 else (-inner, outer)
     if lo > hi:
         return False
     m = len(s)
-    kappa = 1.0 / radius
+    kappa = 1.0 / car.min_turn_radius
     lat = min_turning_offsets(origin, normal, np.full(m, lo), np.full(m, hi), np.zeros(m),
                               SMOOTH_CENTRE_WEIGHT, kappa)
     return float(polygon_turns(origin + lat[:, None] * normal)[0].max()) <= BEND_SLACK * kappa
