@@ -9,8 +9,7 @@ from __future__ import annotations
 import logging
 import math
 import subprocess
-import tempfile
-from functools import cache
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -30,18 +29,30 @@ SEARCH = Search(step=0.05)
 SMALL = CarShape(length=2.5, width=1.4, min_turn_radius=2.0)
 
 
-@cache
-def _bend_network(degrees: float) -> Path:
+@pytest.fixture(scope="module")
+def bend_network(tmp_path_factory: pytest.TempPathFactory) -> Callable[[float], Path]:
+    """A builder of the networks of :func:`_bend_network`, in the module's temporary
+    folder, once per angle."""
+    built: dict[float, Path] = {}
+
+    def build(degrees: float) -> Path:
+        if degrees not in built:
+            built[degrees] = _bend_network(degrees, tmp_path_factory.mktemp("bend"))
+        return built[degrees]
+
+    return build
+
+
+def _bend_network(degrees: float, tmp: Path) -> Path:
     """x -> a, then either the single-lane edge ab, straight for 60 m and then bending by
     ``degrees`` at one vertex (its lane 40 m on), or the longer way round by m on
-    two-lane roads; then b -> y."""
+    two-lane roads; then b -> y (in folder ``tmp``)."""
     theta = math.radians(degrees)
     b = (60.0 + 40.0 * math.cos(theta), 40.0 * math.sin(theta))
     y = (b[0] + 100.0 * math.cos(theta), b[1] + 100.0 * math.sin(theta))
     nodes = {"x": (-100.0, 0.0), "a": (0.0, 0.0), "b": b, "m": (-40.0, 80.0), "y": y}
     edges = [("xa", 2, ""), ("ab", 1, f'shape="0,0 60,0 {b[0]:.3f},{b[1]:.3f}"'),
              ("am", 2, ""), ("mb", 2, ""), ("by", 2, "")]
-    tmp = Path(tempfile.mkdtemp(prefix="bend"))
     (tmp / "n.nod.xml").write_text(
         "<nodes>" + "".join(f'<node id="{k}" x="{x}" y="{y}"/>'
                             for k, (x, y) in nodes.items()) + "</nodes>")
@@ -68,12 +79,13 @@ def _oracle_drives(net: RoadNetwork, edge: str, car: Car) -> bool:
                  car=car, margin=0.0, search=SEARCH).found
 
 
-def test_an_edge_bending_too_sharply_for_the_car_is_avoided_by_level_1() -> None:
+def test_an_edge_bending_too_sharply_for_the_car_is_avoided_by_level_1(
+        bend_network: Callable[[float], Path]) -> None:
     """ab bends by 90 degrees at one vertex inside a 3.2 m lane: the oracle cannot drive
     it with the 4.5 x 1.8 m car and its 4.2 m turning radius, and level 1, given the car,
     goes the longer way round (the pipeline too); a small car with a tighter turning
     circle drives it, and level 1 keeps it for that car."""
-    net = load_network(_bend_network(90.0))
+    net = load_network(bend_network(90.0))
     assert not _oracle_drives(net, "ab", Car())
     assert not bend_fits(net, "ab", "passenger", CarShape())
     assert shortest_route(net, "xa", "by").edges == ("xa", "ab", "by")  # no car
@@ -85,11 +97,11 @@ def test_an_edge_bending_too_sharply_for_the_car_is_avoided_by_level_1() -> None
     assert shortest_route(net, "xa", "by", car=SMALL).edges == ("xa", "ab", "by")
 
 
-def test_a_route_that_must_take_a_tight_bend_says_so(caplog: pytest.LogCaptureFixture
-                                                     ) -> None:
+def test_a_route_that_must_take_a_tight_bend_says_so(
+        bend_network: Callable[[float], Path], caplog: pytest.LogCaptureFixture) -> None:
     """The goal is on ab itself: the route takes it, and says which edge (a warning and
     Route.tight_bends)."""
-    net = load_network(_bend_network(90.0))
+    net = load_network(bend_network(90.0))
     with caplog.at_level(logging.WARNING, logger="splineplan.route"):
         route = shortest_route(net, "xa", "ab", car=CarShape())
     assert route.edges == ("xa", "ab") and route.tight_bends == ("ab",)
@@ -98,12 +110,13 @@ def test_a_route_that_must_take_a_tight_bend_says_so(caplog: pytest.LogCaptureFi
 
 @settings(max_examples=6, deadline=None)
 @given(degrees=st.one_of(st.floats(20.0, 65.0), st.floats(90.0, 150.0)))
-def test_level_1_agrees_with_the_oracle_on_a_bend(degrees: float) -> None:
+def test_level_1_agrees_with_the_oracle_on_a_bend(bend_network: Callable[[float], Path],
+                                                   degrees: float) -> None:
     """A single-lane edge bending by a random angle at one vertex: level 1 finds it fits
     the car where the oracle drives it, and not where the oracle cannot (away from the
     angles of about 70-90 degrees where the two may differ: level 1's test is not a
     search)."""
-    net = load_network(_bend_network(round(degrees, 1)))
+    net = load_network(bend_network(round(degrees, 1)))
     drives = _oracle_drives(net, "ab", Car())
     assert drives == (degrees < 70.0)
     assert bend_fits(net, "ab", "passenger", CarShape()) == drives
