@@ -34,7 +34,7 @@ import functools
 import logging
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -70,6 +70,16 @@ TOW_STEP = 0.002
 #: Slip angle [rad] at the start above which the path is planned again from the centre's
 #: direction (the body's orientation plus the slip, see :func:`plan`).
 SLIP_REPLAN = 0.02
+#: How far inside the goal's speed [m/s] and orientation [rad] intervals the planner's
+#: approximate states must be for the goal to count as reached: the solution's states (the
+#: rear axle's speed, the towed body's orientation) differ from them by about that much.
+REACH_INSET = (0.05, 0.01)
+#: Longest time [s] ahead over which a profile meeting the goal (:meth:`_Timing.meet`) is
+#: sought, and how many steps of the goal's time window it tries.
+MEET_HORIZON = 20.0
+MEET_STEPS = 6
+#: How many stations of the goal's a meeting profile tries per time step and speed.
+MEET_STATIONS = 5
 #: Lowest speed cap [m/s] tried to meet a goal's time window.
 MIN_CAP = 0.5
 #: Cost function named in the solutions (CommonRoad's ``SM1``: acceleration, jerk, lane
@@ -83,6 +93,9 @@ MOVING_MARGIN = 0.5
 #: How far [m] beyond the goal the corridor runs (the goal lanelets' successors), so
 #: that the curve does not end on the goal's edge.
 RUN_ON = 40.0
+#: Room [m] the car's front keeps from the end of a road that ends (a dead end, or the
+#: scenario's edge), where a plan that misses its goal stops.
+ROAD_END_GAP = 0.3
 #: How far inside the goal's lateral extent [m] the vehicle's centre keeps where it passes
 #: the goal (see :func:`goal_keep`), and how fast that band widens away from it [m/m].
 GOAL_INSET = 0.2
@@ -117,6 +130,9 @@ class Vehicle:
         Front-wheel limits [rad], [rad/s].
     a_max, v_max
         Largest acceleration [m/s^2] and speed [m/s].
+    v_switch
+        Speed [m/s] above which the largest acceleration falls as ``a_max v_switch / v``
+        (the engine's power).
     """
 
     type_id: int
@@ -128,6 +144,7 @@ class Vehicle:
     max_steering_rate: float
     a_max: float
     v_max: float
+    v_switch: float = math.inf
 
     @property
     def name(self) -> str:
@@ -144,7 +161,7 @@ class Vehicle:
         return replace(base, s_max=float(min(s_max, self.v_max)), wheelbase=self.wheelbase,
                        max_steering_rate=self.max_steering_rate,
                        min_turn_radius=max(centre, base.min_turn_radius),
-                       a_max=min(base.a_max, self.a_max), b_max=BRAKING)
+                       a_max=min(base.a_max, self.a_max), b_max=BRAKING, road_margin=0.1)
 
     def roadmap_params(self) -> RoadmapParams:
         """Level 2's parameters for this car's body. The corridor is already the route's
@@ -174,7 +191,8 @@ def vehicle(type_id: int) -> Vehicle:
          3: p3.parameters_vehicle3}[type_id]()
     return Vehicle(type_id, float(p.l), float(p.w), float(p.a + p.b), float(p.b),
                    float(p.steering.max), float(p.steering.v_max),
-                   float(p.longitudinal.a_max), float(p.longitudinal.v_max))
+                   float(p.longitudinal.a_max), float(p.longitudinal.v_max),
+                   float(p.longitudinal.v_switch))
 
 
 # -- reading ------------------------------------------------------------------------------
@@ -598,9 +616,11 @@ class Goal:
     lanelets: tuple[int, ...]
 
     def reached(self, step: FloatArray, xy: FloatArray, heading: FloatArray,
-                speed: FloatArray) -> FloatArray:
+                speed: FloatArray, *, inset: tuple[float, float] = (0.0, 0.0)) -> FloatArray:
         """Whether states (time steps, positions ``(n, 2)`` [m], orientations [rad],
-        speeds [m/s]) reach the goal: ``(n,)`` booleans (any of the goal states)."""
+        speeds [m/s]) reach the goal: ``(n,)`` booleans (any of the goal states). ``inset``
+        narrows the speed [m/s] and orientation [rad] intervals by that much each side
+        (for states that approximate the solution's)."""
         import shapely
 
         out = np.zeros(len(step), dtype=bool)
@@ -610,11 +630,11 @@ class Goal:
                 ok &= shapely.contains_xy(self.shapes[k], xy[:, 0], xy[:, 1])
             if self.speed[k] is not None:
                 lo, hi = self.speed[k]  # type: ignore[misc]
-                ok &= (speed >= lo) & (speed <= hi)
+                ok &= (speed >= lo + inset[0]) & (speed <= hi - inset[0])
             if self.orientation[k] is not None:
                 lo, hi = self.orientation[k]  # type: ignore[misc]
                 mid = (lo + hi) / 2.0
-                ok &= np.abs(wrap_angle(heading - mid)) <= (hi - lo) / 2.0
+                ok &= np.abs(wrap_angle(heading - mid)) <= (hi - lo) / 2.0 - inset[1]
             out |= ok
         return out
 
@@ -759,9 +779,14 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
         route = follow_road(net, start_ids[0], s_top * horizon * problem.dt + 50.0)
     statics = static_obstacles(sc)
     tp = car.trajectory_params(max(s_top, 1.0))
-    corridor = route_corridor(net, route, statics)
-    moving = _moving(sc)
     road_ends = not any(net.find_lanelet_by_id(route.chain[-1]).successor)
+
+    def corridor_of(obstacles: Obstacles, passing: bool = False) -> Corridor:
+        c = route_corridor(net, route, obstacles, passing=passing)
+        return _short_of_end(c, car) if road_ends else c
+
+    corridor = corridor_of(statics)
+    moving = _moving(sc)
     end_speed = 0.0 if road_ends else None
     t0 = float(init.time_step) * problem.dt
     timing = _Timing(tp, goal, v0, problem.dt, int(init.time_step), t0, end_speed, moving,
@@ -772,8 +797,7 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
         corridor, tr, sp, obstacles = solver.through_goal(corridor, goal)
     except RoadBlockedError:
         # the route's lanes are blocked: the oncoming lane beside them is passing space
-        corridor, tr, sp, obstacles = solver.through_goal(
-            route_corridor(net, route, statics, passing=True), goal)
+        corridor, tr, sp, obstacles = solver.through_goal(corridor_of(statics, True), goal)
     yielded = tuple(sp.yielded) if sp is not None else ()
     passed = tuple(sp.passed) if sp is not None else ()
     seconds = time.perf_counter() - t_start
@@ -920,6 +944,16 @@ def _moving(scenario: Any) -> list[Any]:
         return []
 
 
+def _short_of_end(corridor: Corridor, car: Vehicle) -> Corridor:
+    """The corridor of a road that ends, cut so that the car stopping at its end keeps its
+    front :data:`ROAD_END_GAP` inside the road (unless that leaves less than a car length):
+    CommonRoad's body is centred ``b`` ahead of the rear axle, the planner's centre half the
+    wheelbase."""
+    front = car.length / 2.0 + max(car.b - car.wheelbase / 2.0, 0.0)
+    cut = corridor.length - front - ROAD_END_GAP
+    return corridor.slice(0.0, cut) if cut > car.length else corridor
+
+
 def _run_on(network: Any, route: LaneletRoute) -> LaneletRoute:
     """The route with the goal lanelet's straightest successors for :data:`RUN_ON` m."""
     last = route.chain[-1]
@@ -970,6 +1004,10 @@ class _Timing:
     moving: list[Any]
     car: Vehicle
 
+    def reaches(self, tr: Trajectory) -> bool:
+        """Whether the timed trajectory reaches the goal."""
+        return _reaches(tr, self.goal, self.dt, self.step0, self.car)
+
     def best(self, tr: Trajectory) -> tuple[Trajectory, Any]:
         """The trajectory with the best speed profile, and the space-time speed plan
         (``None`` without moving obstacles). Without a cap that reaches the goal: the
@@ -984,8 +1022,9 @@ class _Timing:
         if highs and inside.any():
             limit = np.where(inside, np.minimum(limit, max(min(highs), MIN_CAP)), limit)
         first = self.timed(tr, limit, np.inf)
-        half = self.car.wheelbase / 2.0
-        if not self.goal.steps or _reaches(first[0], self.goal, self.dt, self.step0, half):
+        if not self.goal.steps:
+            return first
+        if self.reaches(first[0]):
             return first
         lo_step, hi_step = min(self.goal.steps)
         target = ((lo_step + min(hi_step, lo_step + 10**6)) / 2.0 - self.step0) * self.dt
@@ -1005,9 +1044,113 @@ class _Timing:
                                   else 10))
         for cap in caps:
             cand = self.timed(tr, limit, float(cap))
-            if _reaches(cand[0], self.goal, self.dt, self.step0, half):
+            if self.reaches(cand[0]):
                 return cand
-        return first
+        return self.meet(tr, limit) or first
+
+    def meet(self, tr: Trajectory, limit: FloatArray) -> tuple[Trajectory, Any] | None:
+        """A speed profile that meets the goal where no cap does: slow (or stop) first,
+        then reach the goal's stations at a step of its time window with its speed, at the
+        car's own acceleration limits (:func:`splineplan.speed.meeting_profile`), then
+        brake to a stop. It must keep the path's speed limit and, until the goal, the
+        margin from every moving obstacle. A goal that asks for speed just where the road
+        ahead is blocked (a cyclist stopping in the lane) needs it. ``None`` if no such
+        profile reaches the goal."""
+        from splineplan.spacetime import occupancy
+        from splineplan.speed import meeting_distances
+
+        goal, car, dt = self.goal, self.car, self.dt
+        last = self.step0 + round(MEET_HORIZON / dt)
+        head = np.unwrap(tr.heading)
+
+        @functools.cache
+        def occ_of() -> Any:
+            return occupancy(tr.s, tr.xy, tr.heading,
+                             self.t0 + np.arange(last - self.step0 + 1) * dt, self.moving,
+                             length=car.length, width=car.width, margin=MOVING_MARGIN)
+
+        for k, (lo, hi) in enumerate(goal.steps):
+            lo, hi = max(lo, self.step0 + 1), min(hi, last)
+            if hi < lo:
+                continue
+            where = (goal.inside(tr.xy) if goal.shapes[k] is None
+                     else _contains(goal.shapes[k], tr.xy))
+            if goal.orientation[k] is not None:
+                o_lo, o_hi = goal.orientation[k]  # type: ignore[misc]
+                where &= np.abs(wrap_angle(head - (o_lo + o_hi) / 2.0)) <= (o_hi - o_lo) / 2.0
+            if not where.any():
+                continue
+            i = int(np.argmax(where))
+            j = i + int(np.argmin(where[i:])) - 1 if not where[i:].all() else len(where) - 1
+            s_lo, s_hi = float(tr.s[i]), float(tr.s[j])
+            v_top = float(min(np.max(limit[i:j + 1]), self.tp.s_max))
+            if goal.speed[k] is not None:
+                v_lo, v_hi = goal.speed[k]  # type: ignore[misc]
+                ends = [v for v in (v_lo + min(0.05, (v_hi - v_lo) / 4.0), (v_lo + v_hi) / 2.0)
+                        if v <= v_top]
+            else:
+                ends = [v_top, v_top / 2.0]
+            for step in np.unique(np.round(np.linspace(lo, hi, MEET_STEPS)).astype(int)):
+                t_end = (int(step) - self.step0) * dt
+                for v_end in ends:
+                    a_down = BRAKING
+                    a_up = min(BRAKING, car.a_max * car.v_switch
+                               / max(car.v_switch, v_end, self.v0))
+                    vc_max = ((t_end + self.v0 / a_up + v_end / a_down)
+                              / (1.0 / a_up + 1.0 / a_down))
+                    grid = np.linspace(0.0, vc_max, 200)
+                    d = meeting_distances(self.v0, t_end, v_end, a_up=a_up, a_down=a_down,
+                                          cruise=grid)
+                    ok = np.flatnonzero((d >= s_lo) & (d <= s_hi))
+                    # the station nearest the middle of the goal's first, then others
+                    order = ok[np.argsort(np.abs(d[ok] - (s_lo + s_hi) / 2.0))]
+                    spread = ok[np.linspace(0, len(ok) - 1, min(len(ok), MEET_STATIONS)
+                                            ).astype(int)] if len(ok) else ok
+                    for c in dict.fromkeys([*order[:1].tolist(), *spread.tolist()]):
+                        met = self._meeting(tr, limit, float(grid[c]), t_end, v_end,
+                                            a_up, a_down, occ_of)
+                        if met is not None:
+                            return met
+        return None
+
+    def _meeting(self, tr: Trajectory, limit: FloatArray, cruise: float, t_end: float,
+                 v_end: float, a_up: float, a_down: float, occ_of: Callable[[], Any]
+                 ) -> tuple[Trajectory, Any] | None:
+        """:meth:`meet`'s profile with that cruise speed, if it keeps the limits and
+        reaches the goal."""
+        from splineplan.spacetime import SpeedPlan, _with_plan
+        from splineplan.speed import meeting_profile
+
+        dt = self.dt
+        n = round(t_end / dt)
+        t_meet = np.arange(n + 1) * dt
+        s_m, v_m = meeting_profile(self.v0, cruise, t_end, v_end, t_meet,
+                                   a_up=a_up, a_down=a_down)
+        tb = np.arange(1, math.ceil(v_end / a_down / dt) + 1) * dt
+        v_b = np.maximum(v_end - a_down * tb, 0.0)
+        s_b = s_m[-1] + (v_end + v_b) / 2.0 * np.minimum(tb, v_end / a_down)
+        t_all = np.concatenate((t_meet, t_end + tb))
+        s_all = np.concatenate((s_m, s_b))
+        v_all = np.concatenate((v_m, v_b))
+        # the path may end while it brakes (the solution ends at the goal)
+        beyond = np.flatnonzero(s_all > tr.s[-1])
+        if len(beyond):
+            if beyond[0] <= n:
+                return None
+            t_all, s_all, v_all = t_all[:beyond[0]], s_all[:beyond[0]], v_all[:beyond[0]]
+        if np.any(v_all > np.interp(s_all, tr.s, limit) + 0.05):
+            return None
+        if self.moving:
+            occ = occ_of()
+            on = (s_m[None, :] >= occ.lo[:, :n + 1]) & (
+                s_m[None, :] <= occ.hi[:, :n + 1])
+            if on.any():
+                return None
+        plan = SpeedPlan(self.t0 + t_all, s_all, v_all)
+        cand = _with_plan(tr, plan, self.t0)
+        if self.reaches(cand):
+            return cand, (plan if self.moving else None)
+        return None
 
     def timed(self, tr: Trajectory, limit: FloatArray, cap: float, *, alone: bool = False
               ) -> tuple[Trajectory, Any]:
@@ -1027,6 +1170,12 @@ class _Timing:
                       margin=MOVING_MARGIN, end_speed=self.end_speed, v_limit=lim)
 
 
+def _contains(shape: Any, xy: FloatArray) -> NDArray[np.bool_]:
+    import shapely
+
+    return np.asarray(shapely.contains_xy(shape, xy[:, 0], xy[:, 1]))
+
+
 def _middle(s: FloatArray, inside: NDArray[np.bool_]) -> float:
     """The middle station [m] of the first run of ``inside`` samples."""
     i = int(np.argmax(inside))
@@ -1044,27 +1193,28 @@ def _time_at(tr: Trajectory, station: float) -> float:
     return float(np.interp(station, tr.s[finite], tr.t[finite]))
 
 
-def _reaches(tr: Trajectory, goal: Goal, dt: float, step0: int, half: float) -> bool:
-    steps, xy, head, v = _sampled(tr, dt, step0, half)
-    return bool(goal.reached(steps, xy, head, v).any())
+def _reaches(tr: Trajectory, goal: Goal, dt: float, step0: int, car: Vehicle) -> bool:
+    steps, xy, head, v = _sampled(tr, dt, step0, car)
+    return bool(goal.reached(steps, xy, head, v, inset=REACH_INSET).any())
 
 
-def _sampled(tr: Trajectory, dt: float, step0: int, half: float
+def _sampled(tr: Trajectory, dt: float, step0: int, car: Vehicle
              ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Time steps and, approximately, the body's reference point, heading and speed every
     ``dt`` [s] (past the end of the trajectory the car stands at its end): the body points
-    from the path half the wheelbase ``half`` [m] behind the centre to the centre (the
-    towed rear axle, :func:`ks_states`); its reference point is taken at the centre
-    (CommonRoad's lies ``b`` ahead of the rear axle, within centimetres of it)."""
+    from the path half the wheelbase behind the centre to the centre (the towed rear
+    axle, :func:`ks_states`), and its reference point lies ``b`` ahead of that rear axle
+    (the centre's speed stands for the rear axle's)."""
     end = tr.t[-1] if np.isfinite(tr.t[-1]) else tr.t[np.isfinite(tr.t)][-1]
     n = int(np.floor(end / dt + 1e-9)) + 1
     t = np.arange(n, dtype=np.float64) * dt
     x, y, _, v, st = centre_at(tr, t)
-    back = np.maximum(st - half, 0.0)
+    back = np.maximum(st - car.wheelbase / 2.0, 0.0)
     rx, ry = np.interp(back, tr.s, tr.x), np.interp(back, tr.s, tr.y)
     h = np.arctan2(y - ry, x - rx)
     h = np.where(st - back > 1e-6, h, np.interp(st, tr.s, np.unwrap(tr.heading)))
-    xy = np.column_stack((x, y))
+    ahead = car.b - car.wheelbase / 2.0  # from the centre, along the body
+    xy = np.column_stack((x + ahead * np.cos(h), y + ahead * np.sin(h)))
     return (step0 + np.arange(n)).astype(float), xy, h, v
 
 

@@ -131,3 +131,39 @@ def times_from_profile(s: ArrayLike, v: ArrayLike) -> FloatArray:
         raise ParameterError(f"speed is zero on both ends of the step at station {st[j]:.1f} m")
     dt = np.where(ds > 0, 2.0 * ds / np.where(vsum > 0, vsum, 1.0), 0.0)
     return np.concatenate(([0.0], np.cumsum(dt)))
+
+
+def meeting_distances(v0: float, t_end: float, v_end: float, *, a_up: float, a_down: float,
+                      cruise: ArrayLike) -> FloatArray:
+    """Distance [m] covered in ``t_end`` [s] from speed ``v0`` to ``v_end`` [m/s] by the
+    three-phase profiles of :func:`meeting_profile`, one per ``cruise`` speed [m/s]; ``nan``
+    where the two speed changes take longer than ``t_end``. The distance grows with the
+    cruise speed, so a grid of cruise speeds gives every station reachable at that time
+    with that speed."""
+    vc = np.asarray(cruise, dtype=float)
+    t1 = np.where(vc >= v0, vc - v0, v0 - vc) / np.where(vc >= v0, a_up, a_down)
+    t3 = np.where(v_end >= vc, v_end - vc, vc - v_end) / np.where(v_end >= vc, a_up, a_down)
+    tc = t_end - t1 - t3
+    d = (v0 + vc) / 2.0 * t1 + vc * tc + (vc + v_end) / 2.0 * t3
+    return np.where(tc >= -1e-9, d, np.nan)
+
+
+def meeting_profile(v0: float, cruise: float, t_end: float, v_end: float, times: ArrayLike,
+                    *, a_up: float, a_down: float) -> tuple[FloatArray, FloatArray]:
+    """Distance [m] and speed [m/s] at ``times`` [s] (from 0 to ``t_end``) of the profile
+    that changes from ``v0`` to ``cruise`` at the acceleration or braking limit, holds it
+    (standing still if it is 0) and changes to ``v_end`` so as to end there at ``t_end``:
+    the profile that meets a station at a time with a speed (a goal region with a time
+    window), where driving as fast as allowed arrives too early or too fast."""
+    t = np.clip(np.asarray(times, dtype=float), 0.0, t_end)
+    r1 = a_up if cruise >= v0 else -a_down
+    r3 = a_up if v_end >= cruise else -a_down
+    t1 = (cruise - v0) / r1 if cruise != v0 else 0.0
+    t3 = (v_end - cruise) / r3 if v_end != cruise else 0.0
+    tb = t_end - t3  # the last phase's start
+    u1 = np.minimum(t, t1)
+    uc = np.clip(t - t1, 0.0, max(tb - t1, 0.0))
+    u3 = np.clip(t - tb, 0.0, t3)
+    s = (v0 * u1 + r1 * u1**2 / 2.0 + cruise * uc + cruise * u3 + r3 * u3**2 / 2.0)
+    v = np.where(t < t1, v0 + r1 * u1, np.where(t < tb, cruise, cruise + r3 * u3))
+    return s, np.maximum(v, 0.0)

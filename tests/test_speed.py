@@ -10,6 +10,8 @@ from hypothesis import strategies as st
 from splineplan.errors import ParameterError
 from splineplan.speed import (
     allowed_speed,
+    meeting_distances,
+    meeting_profile,
     speed_profile,
     steering_speed_limit,
     times_from_profile,
@@ -122,3 +124,34 @@ def test_the_compiled_limits_are_the_array_code(seed: int) -> None:
     np.testing.assert_allclose(
         steer, steering_speed_limit(chords, kappa, wheelbase=2.578, max_steering_rate=0.4),
         rtol=1e-9)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.floats(0, 30), st.floats(0, 30), st.floats(0.5, 10), st.floats(1, 10),
+       st.floats(1, 10), st.floats(0, 1))
+def test_a_meeting_profile_ends_where_its_distance_says(v0: float, v_end: float,
+                                                        t_end: float, a_up: float,
+                                                        a_down: float, frac: float) -> None:
+    """Any cruise speed the distances call feasible gives a profile from ``v0`` that ends at
+    ``t_end`` with ``v_end`` after that distance, never faster than its limits change speed
+    and never backwards; the distance grows with the cruise speed."""
+    grid = np.linspace(0.0, 40.0, 400)
+    d = meeting_distances(v0, t_end, v_end, a_up=a_up, a_down=a_down, cruise=grid)
+    ok = np.flatnonzero(np.isfinite(d))
+    if not len(ok):
+        # even the straightest change of speed takes longer than t_end
+        assert abs(v_end - v0) / (a_up if v_end > v0 else a_down) > t_end - 1e-6
+        return
+    assert np.all(np.diff(d[ok]) >= -1e-9)
+    c = float(grid[ok[int(frac * (len(ok) - 1))]])
+    t = np.linspace(0.0, t_end, 2001)
+    s, v = meeting_profile(v0, c, t_end, v_end, t, a_up=a_up, a_down=a_down)
+    assert s[0] == 0.0 and v[0] == pytest.approx(v0)
+    assert v[-1] == pytest.approx(v_end, abs=1e-6)
+    assert s[-1] == pytest.approx(float(np.interp(c, grid, d)), rel=1e-6, abs=1e-6)
+    assert np.all(v >= 0.0) and np.all(np.diff(s) >= -1e-9)
+    acc = np.diff(v) / np.diff(t)
+    assert np.all((acc <= a_up + 1e-6) & (acc >= -a_down - 1e-6))
+    # the distance is the integral of the speed
+    area = float(np.sum((v[1:] + v[:-1]) / 2.0 * np.diff(t)))
+    assert s[-1] == pytest.approx(area, abs=1e-3 * max(1.0, s[-1]))
