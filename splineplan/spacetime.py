@@ -13,7 +13,8 @@ path-velocity decomposition:
    acceleration limits allow while staying behind every obstacle it yields to, braking early
    enough to stop behind it at any later time. Obstacles the fastest profile would touch are
    yielded to, earliest touch first, until none is touched; the others are passed in front of
-   or never met.
+   or never met. One that first touches it from behind (a faster vehicle coming up in its
+   lane) is not yielded to: staying behind it would mean stopping in its way.
 3. **Conflict.** Where even full braking cannot stay behind an obstacle (it comes towards the
    vehicle, or it is already too close), speed alone cannot keep the margin: the result names
    the obstacle, the time and the station (:class:`Conflict`), and
@@ -45,6 +46,9 @@ from splineplan.trajectory import Trajectory, TrajectoryParams, _times, speed_li
 DT = 0.1
 #: Longest time [s] a plan waits or looks ahead before it gives up on an obstacle.
 HORIZON = 120.0
+#: Largest angle [rad] between an obstacle's heading and the path's at which it drives the
+#: path's way (a vehicle coming up from behind, not one crossing).
+SAME_WAY = math.pi / 4.0
 #: Time [s] before and after a conflict over which :meth:`Conflict.as_static` sweeps the
 #: obstacle.
 SWEEP = 1.0
@@ -340,6 +344,7 @@ def speed_among(
         Time step [s].
     """
     st = np.asarray(s, dtype=float)
+    head = np.asarray(heading, dtype=float)
     lim = np.asarray(v_limit, dtype=float)
     if a_max <= 0 or d_max <= 0 or dt <= 0:
         raise ParameterError("a_max, d_max and dt must be positive")
@@ -356,6 +361,7 @@ def speed_among(
     occ = occupancy(st, xy, heading, times, moving, length=length, width=width,
                     margin=margin)
     yielded: list[int] = []
+    behind: list[int] = []  # they come from behind: staying behind them means stopping
     conflict: Conflict | None = None
     plan = free
     for _ in range(len(moving) + 1):
@@ -363,10 +369,13 @@ def speed_among(
         plan = _forward(st, cap, t0, start, dt, wall, a_max, d_max)
         where = _plan_stations(plan[0], plan[1], occ.t)
         conflict = _first_conflict(where, occ, wall, owner, moving)
-        touched = _touched(where, occ, exclude=yielded)
+        touched = _touched(where, occ, exclude=yielded + behind)
         if not touched:
             break
-        yielded.append(touched[0])
+        i = touched[0]
+        (behind if _from_behind(where, occ, i, moving[i], st, head) else yielded).append(i)
+    if conflict is None:  # one from behind that the fastest plan cannot keep ahead of
+        conflict = _touch_conflict(where, occ, behind, moving)
     ahead = np.any(where[None, :] > occ.hi, axis=1)  # in front of its stations at some time
     passed = [moving[i].id for i in range(len(moving)) if i not in yielded and ahead[i]]
     return SpeedPlan(*plan, tuple(moving[i].id for i in yielded), tuple(passed), conflict)
@@ -492,6 +501,35 @@ def _touched(where: FloatArray, occ: Occupancy, exclude: list[int]) -> list[int]
     inside = (where[None, :] >= occ.lo) & (where[None, :] <= occ.hi)
     hit = [int(i) for i in np.flatnonzero(inside.any(axis=1)) if int(i) not in exclude]
     return sorted(hit, key=lambda i: int(np.argmax(inside[i])))
+
+
+def _from_behind(where: FloatArray, occ: Occupancy, i: int, ob: MovingObstacle,
+                 s: FloatArray, heading: FloatArray) -> bool:
+    """Whether obstacle ``i`` first meets the plan (its station ``where`` at each time
+    step) from behind: it drives the path's way (within :data:`SAME_WAY`) and the stations
+    it blocks then lie mostly behind the vehicle's."""
+    inside = (where >= occ.lo[i]) & (where <= occ.hi[i])
+    j = int(np.argmax(inside))
+    if (occ.lo[i, j] + occ.hi[i, j]) / 2.0 >= where[j]:
+        return False
+    _, oh, _ = ob.at([occ.t[j]])
+    path = float(np.interp(where[j], s, np.unwrap(heading)))
+    return bool(abs(float(wrap_angle(oh[0] - path))) < SAME_WAY)
+
+
+def _touch_conflict(where: FloatArray, occ: Occupancy, among: list[int],
+                    moving: Sequence[MovingObstacle]) -> Conflict | None:
+    """The first time step at which the plan is on stations that one of ``among`` blocks."""
+    best: tuple[int, int] | None = None
+    for i in among:
+        inside = (where >= occ.lo[i]) & (where <= occ.hi[i])
+        if inside.any() and (best is None or int(np.argmax(inside)) < best[0]):
+            best = (int(np.argmax(inside)), i)
+    if best is None:
+        return None
+    j, i = best
+    xy, head, _ = moving[i].at([occ.t[j]])
+    return Conflict(moving[i], float(occ.t[j]), float(where[j]), xy[0], float(head[0]))
 
 
 def _first_conflict(where: FloatArray, occ: Occupancy, wall: FloatArray,

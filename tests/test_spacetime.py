@@ -122,6 +122,26 @@ def test_an_oncoming_car_on_the_path_is_a_conflict_for_level_2() -> None:
     assert np.min(static.distance(np.array([[plan.conflict.station, 0.0]]))) < L
 
 
+def test_a_faster_car_from_behind_is_not_stopped_for() -> None:
+    """A car comes up from behind in the lane faster than the vehicle may drive: staying
+    behind it would mean stopping in its way (the rear-end collisions of recorded
+    CommonRoad traffic). The plan drives on as fast as allowed and names it as the
+    conflict for level 2; a slower car behind is never met."""
+    s, xy, h, _ = straight()
+    fast = MovingObstacle.constant_velocity("fast", 0.0, (-10.0, 0.0), 0.0, 16.0, L, W,
+                                            horizon=15.0)
+    plan = plan_against(fast)
+    assert "fast" not in plan.yielded
+    assert plan.conflict is not None and plan.conflict.obstacle.id == "fast"
+    assert np.all(np.diff(plan.v) >= -1e-9)  # it never brakes for it
+    assert plan.v[-1] == pytest.approx(13.0, abs=0.01)
+    slow = MovingObstacle.constant_velocity("slow", 0.0, (-10.0, 0.0), 0.0, 8.0, L, W,
+                                            horizon=15.0)
+    plan = plan_against(slow)
+    assert not plan.yielded and plan.conflict is None
+    assert closest_approach(plan.t, plan.s, xy, s, h, slow) >= MARGIN
+
+
 def test_a_car_in_the_next_lane_does_not_slow_the_vehicle() -> None:
     s, xy, h, lim = straight()
     ob = MovingObstacle.constant_velocity("beside", 0.0, (5.0, 3.2), 0.0, 10.0, L, W,
