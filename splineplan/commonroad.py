@@ -1167,7 +1167,8 @@ class _Timing:
 
         return retime(replace(tr, speed=np.minimum(tr.speed, lim)), self.moving, self.tp,
                       t0=self.t0, length=self.car.length, width=self.car.width,
-                      margin=MOVING_MARGIN, end_speed=self.end_speed, v_limit=lim)
+                      margin=MOVING_MARGIN, end_speed=self.end_speed, v_limit=lim,
+                      pass_from_behind=True)
 
 
 def _contains(shape: Any, xy: FloatArray) -> NDArray[np.bool_]:

@@ -13,8 +13,9 @@ path-velocity decomposition:
    acceleration limits allow while staying behind every obstacle it yields to, braking early
    enough to stop behind it at any later time. Obstacles the fastest profile would touch are
    yielded to, earliest touch first, until none is touched; the others are passed in front of
-   or never met. One that first touches it from behind (a faster vehicle coming up in its
-   lane) is not yielded to: staying behind it would mean stopping in its way.
+   or never met. With ``pass_from_behind``, one that first touches it from behind (a faster
+   vehicle coming up in its lane, whose future is fixed, as a recorded one's) is not yielded
+   to: staying behind it would mean stopping in its way.
 3. **Conflict.** Where even full braking cannot stay behind an obstacle (it comes towards the
    vehicle, or it is already too close), speed alone cannot keep the margin: the result names
    the obstacle, the time and the station (:class:`Conflict`), and
@@ -47,8 +48,8 @@ DT = 0.1
 #: Longest time [s] a plan waits or looks ahead before it gives up on an obstacle.
 HORIZON = 120.0
 #: Largest angle [rad] between an obstacle's heading and the path's at which it drives the
-#: path's way (a vehicle coming up from behind, not one crossing).
-SAME_WAY = math.pi / 4.0
+#: path's way (a vehicle coming up from behind, not one crossing or turning into the path).
+SAME_WAY = 0.35
 #: Time [s] before and after a conflict over which :meth:`Conflict.as_static` sweeps the
 #: obstacle.
 SWEEP = 1.0
@@ -321,6 +322,7 @@ def speed_among(
     d_max: float,
     end_speed: float | None = None,
     dt: float = DT,
+    pass_from_behind: bool = False,
 ) -> SpeedPlan:
     """Fastest progress along a fixed path that keeps ``margin`` [m] from every moving
     obstacle: pass in front of it where the limits allow, else stay behind it.
@@ -342,6 +344,12 @@ def speed_among(
         Speed at the path's end (0 stops there), ``None`` for as fast as allowed.
     dt
         Time step [s].
+    pass_from_behind
+        Never yield to an obstacle that first meets the vehicle from behind, driving the
+        path's way: drive on as fast as allowed, and name it as the conflict where that
+        cannot keep ahead of it. For obstacles whose future is fixed (CommonRoad's recorded
+        traffic drives into whatever stands in its way); among SUMO's traffic and other
+        planned vehicles, which react, it measured no better (see the README).
     """
     st = np.asarray(s, dtype=float)
     head = np.asarray(heading, dtype=float)
@@ -373,7 +381,8 @@ def speed_among(
         if not touched:
             break
         i = touched[0]
-        (behind if _from_behind(where, occ, i, moving[i], st, head) else yielded).append(i)
+        (behind if pass_from_behind and _from_behind(where, occ, i, moving[i], st, head)
+         else yielded).append(i)
     if conflict is None:  # one from behind that the fastest plan cannot keep ahead of
         conflict = _touch_conflict(where, occ, behind, moving)
     ahead = np.any(where[None, :] > occ.hi, axis=1)  # in front of its stations at some time
@@ -506,14 +515,17 @@ def _touched(where: FloatArray, occ: Occupancy, exclude: list[int]) -> list[int]
 def _from_behind(where: FloatArray, occ: Occupancy, i: int, ob: MovingObstacle,
                  s: FloatArray, heading: FloatArray) -> bool:
     """Whether obstacle ``i`` first meets the plan (its station ``where`` at each time
-    step) from behind: it drives the path's way (within :data:`SAME_WAY`) and the stations
-    it blocks then lie mostly behind the vehicle's."""
+    step) from behind: the stations it blocks then lie mostly behind the vehicle's, and it
+    drove the path's way (within :data:`SAME_WAY`) when it first came onto the path (not a
+    vehicle that turns into the path, as at a junction's merge)."""
     inside = (where >= occ.lo[i]) & (where <= occ.hi[i])
     j = int(np.argmax(inside))
     if (occ.lo[i, j] + occ.hi[i, j]) / 2.0 >= where[j]:
         return False
-    _, oh, _ = ob.at([occ.t[j]])
-    path = float(np.interp(where[j], s, np.unwrap(heading)))
+    j0 = int(np.argmax(np.isfinite(occ.hi[i])))  # when it first blocks some station
+    _, oh, _ = ob.at([occ.t[j0]])
+    on = (occ.lo[i, j0] + occ.hi[i, j0]) / 2.0
+    path = float(np.interp(on, s, np.unwrap(heading)))
     return bool(abs(float(wrap_angle(oh[0] - path))) < SAME_WAY)
 
 
@@ -555,19 +567,21 @@ def _plan_stations(t: FloatArray, s: FloatArray, times: FloatArray) -> FloatArra
 # ---- trajectories ----------------------------------------------------------------------------
 def retime(trajectory: Trajectory, moving: Sequence[MovingObstacle], params: TrajectoryParams,
            *, t0: float, length: float, width: float, margin: float,
-           end_speed: float | None = None, v_limit: FloatArray | None = None
-           ) -> tuple[Trajectory, SpeedPlan]:
+           end_speed: float | None = None, v_limit: FloatArray | None = None,
+           pass_from_behind: bool = False) -> tuple[Trajectory, SpeedPlan]:
     """The same path with the speed of :func:`speed_among`, from the trajectory's start
     speed to at most ``end_speed`` (default: its own end speed). ``v_limit`` ``(n,)`` [m/s]
     at the trajectory's samples lowers the path's own speed limit (a cap that times the
     arrival at a goal). The result's times are from ``t0`` like the trajectory's own (from
-    0); a wait is two samples at one station."""
+    0); a wait is two samples at one station. ``pass_from_behind``: see
+    :func:`speed_among`."""
     tr = trajectory
     lim = speed_limit(tr.s, tr.curvature, params)
     if v_limit is not None:
         lim = np.minimum(lim, v_limit)
     plan = speed_among(tr.s, tr.xy, tr.heading, lim, t0=t0, v0=float(tr.speed[0]),
                        moving=moving, length=length, width=width, margin=margin,
+                       pass_from_behind=pass_from_behind,
                        a_max=params.a_max, d_max=params.b_max,
                        end_speed=float(tr.speed[-1]) if end_speed is None else end_speed)
     return _with_plan(tr, plan, t0), plan

@@ -125,11 +125,19 @@ def test_an_oncoming_car_on_the_path_is_a_conflict_for_level_2() -> None:
 def test_a_faster_car_from_behind_is_not_stopped_for() -> None:
     """A car comes up from behind in the lane faster than the vehicle may drive: staying
     behind it would mean stopping in its way (the rear-end collisions of recorded
-    CommonRoad traffic). The plan drives on as fast as allowed and names it as the
-    conflict for level 2; a slower car behind is never met."""
-    s, xy, h, _ = straight()
+    CommonRoad traffic). With ``pass_from_behind`` the plan drives on as fast as allowed
+    and names it as the conflict for level 2; a slower car behind is never met."""
+    s, xy, h, lim = straight()
     fast = MovingObstacle.constant_velocity("fast", 0.0, (-10.0, 0.0), 0.0, 16.0, L, W,
                                             horizon=15.0)
+
+    def plan_against(ob: MovingObstacle):  # type: ignore[no-untyped-def]
+        return speed_among(s, xy, h, lim, t0=0.0, v0=10.0, moving=[ob], length=L, width=W,
+                           margin=MARGIN, a_max=2.0, d_max=4.0, pass_from_behind=True)
+
+    stop = speed_among(s, xy, h, lim, t0=0.0, v0=10.0, moving=[fast], length=L, width=W,
+                       margin=MARGIN, a_max=2.0, d_max=4.0)
+    assert "fast" in stop.yielded and stop.v.min() < 5.0  # the default brakes in its way
     plan = plan_against(fast)
     assert "fast" not in plan.yielded
     assert plan.conflict is not None and plan.conflict.obstacle.id == "fast"
