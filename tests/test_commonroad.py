@@ -204,9 +204,12 @@ def archived(tmp_path_factory: pytest.TempPathFactory) -> Callable[[str], cr.Pro
     folder = tmp_path_factory.mktemp("commonroad")
 
     def read(name: str) -> cr.Problem:
+        path = folder / f"{name}.xml"
         with tarfile.open(ARCHIVE) as tar:
-            tar.extract(f"{name}.xml", folder, filter="data")
-        return cr.read(folder / f"{name}.xml")
+            member = tar.extractfile(f"{name}.xml")
+            assert member is not None
+            path.write_bytes(member.read())
+        return cr.read(path)
 
     return read
 
