@@ -1073,7 +1073,7 @@ class _Timing:
             lo, hi = max(lo, self.step0 + 1), min(hi, last)
             if hi < lo:
                 continue
-            where = (goal.inside(tr.xy) if goal.shapes[k] is None
+            where = (np.ones(len(tr.s), dtype=bool) if goal.shapes[k] is None
                      else _contains(goal.shapes[k], tr.xy))
             if goal.orientation[k] is not None:
                 o_lo, o_hi = goal.orientation[k]  # type: ignore[misc]
@@ -1094,8 +1094,8 @@ class _Timing:
                 t_end = (int(step) - self.step0) * dt
                 for v_end in ends:
                     a_down = BRAKING
-                    a_up = min(BRAKING, car.a_max * car.v_switch
-                               / max(car.v_switch, v_end, self.v0))
+                    top = max(v_end, self.v0, 1e-9)  # the engine's power above v_switch
+                    a_up = min(BRAKING, car.a_max * min(1.0, car.v_switch / top))
                     vc_max = ((t_end + self.v0 / a_up + v_end / a_down)
                               / (1.0 / a_up + 1.0 / a_down))
                     grid = np.linspace(0.0, vc_max, 200)

@@ -349,7 +349,7 @@ def speed_among(
         path's way: drive on as fast as allowed, and name it as the conflict where that
         cannot keep ahead of it. For obstacles whose future is fixed (CommonRoad's recorded
         traffic drives into whatever stands in its way); among SUMO's traffic and other
-        planned vehicles, which react, it measured no better (see the README).
+        planned vehicles, which react, it measured no better (benchmarks/RESULTS.md).
     """
     st = np.asarray(s, dtype=float)
     head = np.asarray(heading, dtype=float)
