@@ -621,13 +621,11 @@ class Goal:
         speeds [m/s]) reach the goal: ``(n,)`` booleans (any of the goal states). ``inset``
         narrows the speed [m/s] and orientation [rad] intervals by that much each side
         (for states that approximate the solution's)."""
-        import shapely
-
         out = np.zeros(len(step), dtype=bool)
         for k in range(len(self.steps)):
             ok = (step >= self.steps[k][0]) & (step <= self.steps[k][1])
             if self.shapes[k] is not None:
-                ok &= shapely.contains_xy(self.shapes[k], xy[:, 0], xy[:, 1])
+                ok &= _contains(self.shapes[k], xy)
             if self.speed[k] is not None:
                 lo, hi = self.speed[k]  # type: ignore[misc]
                 ok &= (speed >= lo + inset[0]) & (speed <= hi - inset[0])
@@ -645,14 +643,12 @@ class Goal:
 
     def inside(self, xy: FloatArray) -> NDArray[np.bool_]:
         """Whether points ``(n, 2)`` [m] lie in a goal position (all, without one)."""
-        import shapely
-
         if not self.has_position:
             return np.ones(len(xy), dtype=bool)
         out = np.zeros(len(xy), dtype=bool)
         for shape in self.shapes:
             if shape is not None:
-                out |= shapely.contains_xy(shape, xy[:, 0], xy[:, 1])
+                out |= _contains(shape, xy)
         return out
 
 
@@ -1022,9 +1018,7 @@ class _Timing:
         if highs and inside.any():
             limit = np.where(inside, np.minimum(limit, max(min(highs), MIN_CAP)), limit)
         first = self.timed(tr, limit, np.inf)
-        if not self.goal.steps:
-            return first
-        if self.reaches(first[0]):
+        if not self.goal.steps or self.reaches(first[0]):
             return first
         lo_step, hi_step = min(self.goal.steps)
         target = ((lo_step + min(hi_step, lo_step + 10**6)) / 2.0 - self.step0) * self.dt
@@ -1080,8 +1074,7 @@ class _Timing:
                 where &= np.abs(wrap_angle(head - (o_lo + o_hi) / 2.0)) <= (o_hi - o_lo) / 2.0
             if not where.any():
                 continue
-            i = int(np.argmax(where))
-            j = i + int(np.argmin(where[i:])) - 1 if not where[i:].all() else len(where) - 1
+            i, j = _first_run(where)
             s_lo, s_hi = float(tr.s[i]), float(tr.s[j])
             v_top = float(min(np.max(limit[i:j + 1]), self.tp.s_max))
             if goal.speed[k] is not None:
@@ -1172,17 +1165,22 @@ class _Timing:
 
 
 def _contains(shape: Any, xy: FloatArray) -> NDArray[np.bool_]:
+    """Whether points ``(n, 2)`` [m] lie in a shapely geometry."""
     import shapely
 
     return np.asarray(shapely.contains_xy(shape, xy[:, 0], xy[:, 1]))
 
 
+def _first_run(inside: NDArray[np.bool_]) -> tuple[int, int]:
+    """First and last index of the first run of ``inside`` samples (one is true)."""
+    i = int(np.argmax(inside))
+    rest = inside[i:]
+    return i, (i + int(np.argmin(rest)) - 1 if not rest.all() else len(inside) - 1)
+
+
 def _middle(s: FloatArray, inside: NDArray[np.bool_]) -> float:
     """The middle station [m] of the first run of ``inside`` samples."""
-    i = int(np.argmax(inside))
-    j = i
-    while j + 1 < len(inside) and inside[j + 1]:
-        j += 1
+    i, j = _first_run(inside)
     return float((s[i] + s[j]) / 2.0)
 
 

@@ -540,8 +540,7 @@ def _touch_conflict(where: FloatArray, occ: Occupancy, among: list[int],
     if best is None:
         return None
     j, i = best
-    xy, head, _ = moving[i].at([occ.t[j]])
-    return Conflict(moving[i], float(occ.t[j]), float(where[j]), xy[0], float(head[0]))
+    return _conflict_at(moving[i], float(occ.t[j]), float(where[j]))
 
 
 def _first_conflict(where: FloatArray, occ: Occupancy, wall: FloatArray,
@@ -553,9 +552,13 @@ def _first_conflict(where: FloatArray, occ: Occupancy, wall: FloatArray,
     if not bad.any():
         return None
     j = int(np.argmax(bad))
-    ob = moving[int(owner[j])]
-    xy, head, _ = ob.at([occ.t[j]])
-    return Conflict(ob, float(occ.t[j]), float(where[j]), xy[0], float(head[0]))
+    return _conflict_at(moving[int(owner[j])], float(occ.t[j]), float(where[j]))
+
+
+def _conflict_at(ob: MovingObstacle, t: float, station: float) -> Conflict:
+    """The conflict with ``ob`` at time ``t`` [s] and the vehicle's ``station`` [m]."""
+    xy, head, _ = ob.at([t])
+    return Conflict(ob, t, station, xy[0], float(head[0]))
 
 
 def _plan_stations(t: FloatArray, s: FloatArray, times: FloatArray) -> FloatArray:
