@@ -74,15 +74,8 @@ def test_static_obstacles_are_passed_with_room(solved: dict[str, cr.CommonRoadPl
     for name in ("ZAM_Urban-3_1", "ZAM_Urban-2_1"):
         res = solved[name]
         assert len(res.problem.scenario.static_obstacles) >= 1
-        car = res.vehicle
         polys = [shapely.Polygon(p) for p in cr.static_obstacles(res.problem.scenario).polygons()]
-        gaps = []
-        for st in res.states:
-            c, s = np.cos(st.orientation), np.sin(st.orientation)
-            hl, hw = car.length / 2, car.width / 2
-            box = shapely.Polygon([st.position + a * np.array([c, s]) + b * np.array([-s, c])
-                                   for a, b in ((-hl, -hw), (hl, -hw), (hl, hw), (-hl, hw))])
-            gaps.append(min(box.distance(p) for p in polys))
+        gaps = [min(box.distance(p) for p in polys) for box in _ks_boxes(res)]
         assert min(gaps) > 0.1
 
 
