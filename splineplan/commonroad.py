@@ -1045,9 +1045,10 @@ class _Timing:
     def meet(self, tr: Trajectory, limit: FloatArray) -> tuple[Trajectory, Any] | None:
         """A speed profile that meets the goal where no cap does: slow (or stop) first,
         then reach the goal's stations at a step of its time window with its speed, at the
-        car's own acceleration limits (:func:`splineplan.speed.meeting_profile`), then
-        brake to a stop. It must keep the path's speed limit and, until the goal, the
-        margin from every moving obstacle. A goal that asks for speed just where the road
+        car's own acceleration limits (:func:`splineplan.speed.meeting_profile`; the
+        profile that changes speed least is tried first), then brake to a stop. It must
+        keep the path's speed limit and, until the goal, the margin from every moving
+        obstacle. A goal that asks for speed just where the road
         ahead is blocked (a cyclist stopping in the lane) needs it. ``None`` if no such
         profile reaches the goal."""
         from splineplan.spacetime import occupancy
@@ -1095,8 +1096,8 @@ class _Timing:
                     d = meeting_distances(self.v0, t_end, v_end, a_up=a_up, a_down=a_down,
                                           cruise=grid)
                     ok = np.flatnonzero((d >= s_lo) & (d <= s_hi))
-                    # the station nearest the middle of the goal's first, then others
-                    order = ok[np.argsort(np.abs(d[ok] - (s_lo + s_hi) / 2.0))]
+                    # the gentlest first (the cruise nearest the start's speed), then others
+                    order = ok[np.argsort(np.abs(grid[ok] - self.v0))]
                     spread = ok[np.linspace(0, len(ok) - 1, min(len(ok), MEET_STATIONS)
                                             ).astype(int)] if len(ok) else ok
                     for c in dict.fromkeys([*order[:1].tolist(), *spread.tolist()]):
