@@ -88,8 +88,14 @@ COST_FUNCTION = "SM1"
 #: Braking [m/s^2] planned with: a hard stop on a dry road (CommonRoad's KS model allows
 #: up to its ``a_max``, 11.5 m/s^2 for the BMW); splineplan's 4 m/s^2 is a comfortable stop.
 BRAKING = 8.0
-#: Margin [m] kept from moving obstacles by the space-time speed plan.
-MOVING_MARGIN = 0.5
+#: Margin [m] kept from moving obstacles by the space-time speed plan. A scenario's
+#: dynamic obstacles drive a recorded future exactly, and the occupancy is already widened
+#: by a time step and a path sample each side; the margin covers the few centimetres by
+#: which CommonRoad's body (centred ``b`` ahead of the rear axle, turned by the slip
+#: angle) lies beside the planner's. 0.5 m kept the car from goals that a recorded car
+#: reached just behind a cyclist (RUS_Bicycle-4_1, -4_2, -6_1); 0.15 m let a car turning
+#: at a junction touch one turning beside it (DEU_Muc-8_2).
+MOVING_MARGIN = 0.2
 #: How far [m] beyond the goal the corridor runs (the goal lanelets' successors), so
 #: that the curve does not end on the goal's edge.
 RUN_ON = 40.0
