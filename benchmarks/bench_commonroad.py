@@ -45,13 +45,16 @@ CHECKS = ("collision_free", "road_compliant", "feasible", "goal_reached", "start
 #: Time [s] a check may take: the drivability checker's road boundary never finishes on
 #: one scenario (ZAM_Tutorial-1_1_T-1); a check stopped there counts as failed.
 CHECK_SECONDS = 60
+#: Wall time [s] the peer's run may take: on ZAM_Tutorial-1_1_T-1 (no goal state) it did
+#: not finish in 15 minutes; a run stopped there counts as failed.
+PEER_SECONDS = 300
 
 
 @contextlib.contextmanager
 def _time_limit(seconds: int) -> Iterator[None]:
     """Raise TimeoutError inside the block after ``seconds`` (main thread, Unix)."""
     def stop(signum: int, frame: Any) -> None:
-        raise TimeoutError(f"check took over {seconds} s")
+        raise TimeoutError(f"stopped after {seconds} s")
 
     old = signal.signal(signal.SIGALRM, stop)
     signal.alarm(seconds)
@@ -87,18 +90,9 @@ def _splineplan(path: Path) -> dict[str, Any]:
 
 def _reactive(path: Path, budget: float) -> dict[str, Any]:
     """The reactive planner's run (see the module docstring), stopped after ``budget``
-    seconds of its planning (then judged as far as it got)."""
+    seconds of its planning (then judged as far as it got), or as failed after
+    :data:`PEER_SECONDS` of wall time."""
     from commonroad.common.file_reader import CommonRoadFileReader
-    from commonroad_rp.reactive_planner import ReactivePlanner
-    from commonroad_rp.utility.config import ReactivePlannerConfiguration
-    from commonroad_rp.utility.evaluation import (
-        create_full_solution_trajectory,
-        create_planning_problem_solution,
-    )
-    from commonroad_rp.utility.utils_coordinate_system import (
-        create_coordinate_system,
-        create_initial_ref_path,
-    )
 
     from splineplan.commonroad import certify_solution
 
@@ -108,40 +102,8 @@ def _reactive(path: Path, budget: float) -> dict[str, Any]:
     cycles: list[float] = []
     t_start = time.perf_counter()
     try:
-        config = ReactivePlannerConfiguration()
-        # one process: with its default worker processes, a worker that raises (a sample
-        # outside its curvilinear frame) leaves the planner waiting for it forever, and two
-        # cores shared with six workers measure nothing
-        config.debug.multiproc = False
-        config.update(scenario=scenario, planning_problem=pp)
-        config.planning_problem_set = pps
-        planner = ReactivePlanner(config)
-        # its coordinate system made with the clcs package's default settings (the
-        # planner's own call passes none, which commonroad-clcs 2025.2 refuses)
-        planner.set_reference_path(coordinate_system=create_coordinate_system(
-            create_initial_ref_path(scenario.lanelet_network, pp)))
-        planner.record_state_and_input(planner.x_0)
-        last = max(int(getattr(s.time_step, "end", 200)) for s in pp.goal.state_list)
-        optimal = None
-        while (not planner.goal_reached() and len(planner.record_state_list) <= last + 1
-               and sum(cycles) < budget):
-            count = len(planner.record_state_list) - 1
-            k = count % config.planning.replanning_frequency
-            if k == 0:
-                planner.set_desired_velocity(current_speed=planner.x_0.velocity)
-                t0 = time.perf_counter()
-                optimal = planner.plan()
-                cycles.append(time.perf_counter() - t0)
-                if not optimal:
-                    break
-            assert optimal is not None
-            planner.record_state_and_input(optimal[0].state_list[1 + k])
-            planner.reset(initial_state_cart=planner.record_state_list[-1],
-                          initial_state_curv=(optimal[1][1 + k], optimal[2][1 + k]),
-                          collision_checker=planner.collision_checker,
-                          coordinate_system=planner.coordinate_system)
-        traj = create_full_solution_trajectory(config, planner.record_state_list)
-        sol = create_planning_problem_solution(config, traj, scenario, pp)
+        with _time_limit(PEER_SECONDS):
+            sol = _reactive_solution(scenario, pps, pp, budget, cycles)
         with _time_limit(CHECK_SECONDS):
             cert = certify_solution(scenario, pp, sol)
     except Exception as err:  # the peer's own failures are part of the result
@@ -154,6 +116,57 @@ def _reactive(path: Path, budget: float) -> dict[str, Any]:
                cycles=len(cycles), plan_ms=1e3 * sum(cycles),
                total_ms=1e3 * (time.perf_counter() - t_start))
     return row
+
+
+def _reactive_solution(scenario: Any, pps: Any, pp: Any, budget: float,
+                       cycles: list[float]) -> Any:
+    """The reactive planner's solution of planning problem ``pp``, each cycle's planning
+    time [s] appended to ``cycles`` (see :func:`_reactive`)."""
+    from commonroad_rp.reactive_planner import ReactivePlanner
+    from commonroad_rp.utility.config import ReactivePlannerConfiguration
+    from commonroad_rp.utility.evaluation import (
+        create_full_solution_trajectory,
+        create_planning_problem_solution,
+    )
+    from commonroad_rp.utility.utils_coordinate_system import (
+        create_coordinate_system,
+        create_initial_ref_path,
+    )
+
+    config = ReactivePlannerConfiguration()
+    # one process: with its default worker processes, a worker that raises (a sample
+    # outside its curvilinear frame) leaves the planner waiting for it forever, and two
+    # cores shared with six workers measure nothing
+    config.debug.multiproc = False
+    config.update(scenario=scenario, planning_problem=pp)
+    config.planning_problem_set = pps
+    planner = ReactivePlanner(config)
+    # its coordinate system made with the clcs package's default settings (the
+    # planner's own call passes none, which commonroad-clcs 2025.2 refuses)
+    planner.set_reference_path(coordinate_system=create_coordinate_system(
+        create_initial_ref_path(scenario.lanelet_network, pp)))
+    planner.record_state_and_input(planner.x_0)
+    last = max(int(getattr(s.time_step, "end", 200)) for s in pp.goal.state_list)
+    optimal = None
+    while (not planner.goal_reached() and len(planner.record_state_list) <= last + 1
+           and sum(cycles) < budget):
+        count = len(planner.record_state_list) - 1
+        k = count % config.planning.replanning_frequency
+        if k == 0:
+            planner.set_desired_velocity(current_speed=planner.x_0.velocity)
+            t0 = time.perf_counter()
+            optimal = planner.plan()
+            cycles.append(time.perf_counter() - t0)
+            if not optimal:
+                break
+        assert optimal is not None
+        planner.record_state_and_input(optimal[0].state_list[1 + k])
+        planner.reset(initial_state_cart=planner.record_state_list[-1],
+                      initial_state_curv=(optimal[1][1 + k], optimal[2][1 + k]),
+                      collision_checker=planner.collision_checker,
+                      coordinate_system=planner.coordinate_system)
+    traj = create_full_solution_trajectory(config, planner.record_state_list)
+    return create_planning_problem_solution(config, traj, scenario, pp)
 
 
 def _scenarios(folder: Path | None, tmp: Path) -> list[Path]:
