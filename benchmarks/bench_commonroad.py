@@ -12,7 +12,8 @@ history, and a seeded sample of the others there. Each is solved by
   one process, see :func:`_reactive`; the route planner's shortest reference path),
   replanning every third step as its own example script does, until the goal is reached,
   it finds no trajectory, the goal's last time step passes, or its planning time runs
-  over ``--peer-budget``; its time per cycle is that of ``ReactivePlanner.plan``.
+  over ``--peer-budget``; its time per cycle is that of ``ReactivePlanner.plan``. A run
+  that takes over :data:`PEER_SECONDS` of wall time counts as failed.
 
 Both solutions are judged by the same checks (:func:`splineplan.commonroad.certify_solution`:
 collisions with every obstacle at its time, the road boundary, ``trajectory_feasibility``
