@@ -295,6 +295,29 @@ class Corridor:
         kr, kl = ((None, None) if self.keep_left is None else self.keep_at(ss))
         return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr, ends)
 
+    def extend_back(self, length: float) -> Corridor:
+        """The corridor with ``length`` [m] more before its start, straight along its first
+        segment with its first boundaries (stations restarting at 0 there; the first edge
+        covers the extension): for a vehicle whose centre lies behind the start, as one
+        that SUMO inserts on an edge shorter than itself."""
+        if length <= 0.0:
+            return self
+        d = self.reference[1] - self.reference[0]
+        back = self.reference[0] - float(length) * d / float(np.hypot(*d))
+        ref = np.vstack((back[None], self.reference))
+        ss = np.concatenate(([0.0], self.s + length))
+
+        def ahead(a: FloatArray | None) -> FloatArray | None:
+            return None if a is None else np.concatenate((a[:1], a))
+
+        starts = self.edge_starts + length
+        if len(starts):
+            starts[0] = 0.0
+        ends = self.edge_ends + length if len(self.edge_ends) else self.edge_ends
+        return Corridor(ref, ss, ahead(self.left), ahead(self.right), self.edges, starts,
+                        self.offset - length, ahead(self.keep_left), ahead(self.keep_right),
+                        ends)
+
     def segments(self, length: float, overlap: float = 0.0) -> list[Corridor]:
         """The corridor cut into pieces of at most ``length`` [m] (the last may be shorter).
 

@@ -93,6 +93,27 @@ def test_slice_and_edges() -> None:
         c.slice(50.0, 50.0)
 
 
+def test_extend_back_adds_road_before_the_start() -> None:
+    """A corridor extended back by 4 m: straight along its first segment, with its first
+    boundaries; stations restart there, the whole route's stations (offset) stay, and the
+    first edge covers the extension. A point 2 m behind the old start lies on it."""
+    ref = np.array([[0.0, 0.0], [0.0, 100.0]])
+    c = Corridor.from_reference(ref, [3, 2], [-3, -2], edges=("a", "b"), edge_starts=(0, 40),
+                                offset=10.0)
+    e = c.extend_back(4.0)
+    assert e.length == pytest.approx(104.0)
+    assert e.offset == pytest.approx(6.0)
+    assert e.edges == ("a", "b")
+    np.testing.assert_allclose(e.edge_starts, [0.0, 44.0])
+    np.testing.assert_allclose(e.to_xy(0.0, 0.0), [0.0, -4.0], atol=1e-9)
+    s, lat = e.to_sl(np.array([[1.0, -2.0]]))[0]
+    assert s == pytest.approx(2.0) and lat == pytest.approx(-1.0)
+    assert bool(e.contains(np.array([[1.0, -2.0]]))[0])
+    np.testing.assert_allclose(e.bounds_at([1.0]), ([-3.0], [3.0]))
+    np.testing.assert_allclose(e.to_xy(44.0, 0.0), c.to_xy(40.0, 0.0), atol=1e-9)
+    assert c.extend_back(0.0) is c
+
+
 @pytest.mark.parametrize(("length", "overlap"), [(30.0, 0.0), (30.0, 5.0), (200.0, 10.0)])
 def test_segments_cover_the_corridor(length: float, overlap: float) -> None:
     c = arc_corridor()

@@ -141,6 +141,36 @@ def test_share_plans_a_seeded_draw(tmp_path: Path) -> None:
         assert v.metrics["depart_time"] is not None
 
 
+def test_a_vehicle_inserted_on_an_edge_shorter_than_itself_drives_off(tmp_path: Path) -> None:
+    """SUMO inserts a 5 m car on a first edge 1 m long with its front at the edge's end, so
+    that its centre lies 1.5 m behind its route's start (Monaco's random trips have such
+    edges). The planned vehicle plans on its route extended back and arrives; before, it
+    could plan no start outside the corridor and stood there for the whole run."""
+    (tmp_path / "n.nod.xml").write_text(
+        '<nodes><node id="a" x="0" y="0"/><node id="b" x="1" y="0"/>'
+        '<node id="c" x="200" y="0"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text(
+        '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="13.89"/>'
+        '<edge id="bc" from="b" to="c" numLanes="1" speed="13.89"/></edges>')
+    subprocess.run([sumolib.checkBinary("netconvert"), "-n", str(tmp_path / "n.nod.xml"),
+                    "-e", str(tmp_path / "n.edg.xml"), "-o", str(tmp_path / "n.net.xml")],
+                   check=True, capture_output=True)
+    (tmp_path / "r.rou.xml").write_text(
+        '<routes><vType id="car" vClass="passenger" length="5"/><vehicle id="v" type="car" '
+        'depart="0" departSpeed="max"><route edges="ab bc"/></vehicle></routes>')
+    cfg = tmp_path / "short.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="n.net.xml"/>'
+                   '<route-files value="r.rou.xml"/></input><time><end value="60"/>'
+                   '<step-length value="0.1"/></time></configuration>')
+    r = simulate(sumo_scenario(cfg), out_dir=tmp_path / "out", vehicles=("v",),
+                 progress=False)
+    m = r.vehicles["v"].metrics
+    assert m["status"] == "arrived"
+    assert m["distance"] > 190.0
+    # off the road only until its rear has come onto the first edge (3.5 m at 13.89 m/s)
+    assert m["time_off_road"] <= 0.5
+
+
 # ---- bad input ------------------------------------------------------------------------------
 
 def _cli(*args: str) -> int:

@@ -259,18 +259,23 @@ class Replanning(Perception):
 
         sc, ego = self.sc, self.sc.ego
         assert self.corridor is not None
-        s0 = max(self.station - ego.length, 0.0)
+        # a vehicle whose centre lies behind its route's start (SUMO inserts it with its
+        # front on a first edge shorter than itself) plans on the route extended back
+        behind = -float(self.corridor.to_sl(self.pose[None, :2])[0, 0])
+        back = behind + ego.length if behind > 0.0 else 0.0
+        route = self.corridor.extend_back(back)
+        s0 = max(self.station - ego.length, -back)
         s1 = self.station + sc.sim.lookahead
         if len(obstacles):  # reach past every obstacle seen, so a closed road shows at once
             far = float(self.corridor.to_sl(obstacles.vertices)[:, 0].max())
             s1 = max(s1, far + ego.length + 2.0 * sc.roadmap.d)
         s1 = min(s1, self.corridor.length)
         if s1 - s0 < 2.0 * sc.roadmap.d + ego.length:
-            s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, 0.0)
+            s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, -back)
         final = s1 >= self.corridor.length - 1e-6
         everything = obstacles if moving is None else obstacles + moving
         try:
-            window = self.corridor.slice(s0, s1)
+            window = route.slice(s0 + back, s1 + back)
             if in_lane:
                 width = self._lane_width()
                 if width is None:
