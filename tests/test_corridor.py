@@ -114,6 +114,24 @@ def test_extend_back_adds_road_before_the_start() -> None:
     assert c.extend_back(0.0) is c
 
 
+@given(s=st.floats(0.0, 44.9), lat=st.floats(-3.9, 3.9), back=st.floats(0.1, 10.0))
+def test_extend_back_keeps_the_road_and_leads_into_it(s: float, lat: float,
+                                                     back: float) -> None:
+    """On a curved corridor extended back: every point of the road is where it was, at its
+    station plus the extension; a point the extension covers lies on the line of the first
+    segment, within the first boundaries."""
+    c = arc_corridor()
+    e = c.extend_back(back)
+    np.testing.assert_allclose(e.to_xy(s + back, lat), c.to_xy(s, lat), atol=1e-6)
+    np.testing.assert_allclose(e.bounds_at([s + back]), c.bounds_at([s]), atol=1e-9)
+    behind = e.to_xy(back / 2.0, lat)
+    d = c.reference[1] - c.reference[0]
+    d = d / np.hypot(*d)
+    rel = behind - c.reference[0]
+    assert float(rel @ d) == pytest.approx(-back / 2.0, abs=1e-6)
+    assert bool(e.contains(behind[None])[0]) == bool(c.right[0] <= lat <= c.left[0])
+
+
 @pytest.mark.parametrize(("length", "overlap"), [(30.0, 0.0), (30.0, 5.0), (200.0, 10.0)])
 def test_segments_cover_the_corridor(length: float, overlap: float) -> None:
     c = arc_corridor()
