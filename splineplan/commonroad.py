@@ -157,6 +157,12 @@ class Vehicle:
         """CommonRoad's name of the type (``BMW_320i``)."""
         return VEHICLE_TYPES[self.type_id]
 
+    @property
+    def reference_ahead(self) -> float:
+        """How far [m] CommonRoad's reference point (``b`` ahead of the rear axle) lies
+        ahead of the planner's centre (half the wheelbase ahead of it), along the body."""
+        return self.b - self.wheelbase / 2.0
+
     def trajectory_params(self, s_max: float) -> TrajectoryParams:
         """Level 3's parameters for this car at top speed ``s_max`` [m/s]: its wheelbase and
         steering rate, and a turning radius no tighter than its steering angle allows
@@ -763,7 +769,7 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     direction = np.array([math.cos(head0), math.sin(head0)])
     # the planner's centre lies half the wheelbase ahead of the rear axle, CommonRoad's
     # reference point ``b`` ahead of it
-    centre0 = np.asarray(init.position, dtype=float) + (car.wheelbase / 2.0 - car.b) * direction
+    centre0 = np.asarray(init.position, dtype=float) - car.reference_ahead * direction
     goal = goal_of(problem)
     rp = roadmap_params or car.roadmap_params()
     start_ids = _start_lanelets(net, np.asarray(init.position, dtype=float), head0,
@@ -951,7 +957,7 @@ def _short_of_end(corridor: Corridor, car: Vehicle) -> Corridor:
     front :data:`ROAD_END_GAP` inside the road (unless that leaves less than a car length):
     CommonRoad's body is centred ``b`` ahead of the rear axle, the planner's centre half the
     wheelbase."""
-    front = car.length / 2.0 + max(car.b - car.wheelbase / 2.0, 0.0)
+    front = car.length / 2.0 + max(car.reference_ahead, 0.0)
     cut = corridor.length - front - ROAD_END_GAP
     return corridor.slice(0.0, cut) if cut > car.length else corridor
 
@@ -1090,10 +1096,10 @@ class _Timing:
                         if v <= v_top]
             else:
                 ends = [v_top, v_top / 2.0]
+            a_down = BRAKING
             for step in np.unique(np.round(np.linspace(lo, hi, MEET_STEPS)).astype(int)):
                 t_end = (int(step) - self.step0) * dt
                 for v_end in ends:
-                    a_down = BRAKING
                     top = max(v_end, self.v0, 1e-9)  # the engine's power above v_switch
                     a_up = min(BRAKING, car.a_max * min(1.0, car.v_switch / top))
                     vc_max = ((t_end + self.v0 / a_up + v_end / a_down)
@@ -1219,7 +1225,7 @@ def _sampled(tr: Trajectory, dt: float, step0: int, car: Vehicle
     rx, ry = np.interp(back, tr.s, tr.x), np.interp(back, tr.s, tr.y)
     h = np.arctan2(y - ry, x - rx)
     h = np.where(st - back > 1e-6, h, np.interp(st, tr.s, np.unwrap(tr.heading)))
-    ahead = car.b - car.wheelbase / 2.0  # from the centre, along the body
+    ahead = car.reference_ahead
     xy = np.column_stack((x + ahead * np.cos(h), y + ahead * np.sin(h)))
     return (step0 + np.arange(n)).astype(float), xy, h, v
 

@@ -307,16 +307,17 @@ class Corridor:
         ref = np.vstack((back[None], self.reference))
         ss = np.concatenate(([0.0], self.s + length))
 
-        def ahead(a: FloatArray | None) -> FloatArray | None:
-            return None if a is None else np.concatenate((a[:1], a))
+        def ahead(a: FloatArray) -> FloatArray:  # the first value over the extension
+            return np.concatenate((a[:1], a))
 
+        kl = None if self.keep_left is None else ahead(self.keep_left)
+        kr = None if self.keep_right is None else ahead(self.keep_right)
         starts = self.edge_starts + length
         if len(starts):
             starts[0] = 0.0
         ends = self.edge_ends + length if len(self.edge_ends) else self.edge_ends
         return Corridor(ref, ss, ahead(self.left), ahead(self.right), self.edges, starts,
-                        self.offset - length, ahead(self.keep_left), ahead(self.keep_right),
-                        ends)
+                        self.offset - length, kl, kr, ends)
 
     def segments(self, length: float, overlap: float = 0.0) -> list[Corridor]:
         """The corridor cut into pieces of at most ``length`` [m] (the last may be shorter).

@@ -114,7 +114,7 @@ def test_extend_back_adds_road_before_the_start() -> None:
     assert c.extend_back(0.0) is c
 
 
-@given(s=st.floats(0.0, 44.9), lat=st.floats(-3.9, 3.9), back=st.floats(0.1, 10.0))
+@given(s=st.floats(0.0, 44.9), lat=st.floats(-5.0, 5.0), back=st.floats(0.1, 10.0))
 def test_extend_back_keeps_the_road_and_leads_into_it(s: float, lat: float,
                                                      back: float) -> None:
     """On a curved corridor extended back: every point of the road is where it was, at its

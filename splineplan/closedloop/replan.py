@@ -260,11 +260,14 @@ class Replanning(Perception):
         sc, ego = self.sc, self.sc.ego
         assert self.corridor is not None
         # a vehicle whose centre lies behind its route's start (SUMO inserts it with its
-        # front on a first edge shorter than itself) plans on the route extended back
-        behind = -float(self.corridor.to_sl(self.pose[None, :2])[0, 0])
+        # front on a first edge shorter than itself; its station is then 0) plans on the
+        # route extended back, from a car length behind it
+        behind = 0.0
+        if self.station <= 0.0:
+            behind = max(-float(self.corridor.to_sl(self.pose[None, :2])[0, 0]), 0.0)
         back = behind + ego.length if behind > 0.0 else 0.0
         route = self.corridor.extend_back(back)
-        s0 = max(self.station - ego.length, -back)
+        s0 = max(self.station - ego.length, 0.0) - back
         s1 = self.station + sc.sim.lookahead
         if len(obstacles):  # reach past every obstacle seen, so a closed road shows at once
             far = float(self.corridor.to_sl(obstacles.vertices)[:, 0].max())
