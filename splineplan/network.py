@@ -258,6 +258,35 @@ class RoadNetwork:
             conns = [c for c in conns if self._connection_allows(c, vclass)]
         return tuple(conns)
 
+    def lane_after(self, from_edge: str, lane: int, to_edge: str, vclass: str, *,
+                   via: str | None = None) -> int | None:
+        """The lane of ``to_edge`` that lane ``lane`` of ``from_edge`` leads to, as SUMO's
+        connections say; lanes counted from the right among those ``vclass`` may use
+        (as a route's corridor counts them). ``None`` where no connection joins the edges.
+
+        ``via``: the internal lane a vehicle is on, if it is in the junction already (its
+        connection decides). Otherwise the connection from ``lane``, or from the nearest
+        lane that has one (the vehicle changes to it before the junction); of several, the
+        one to the lane nearest ``lane``'s place.
+        """
+        conns = self.connections_between(from_edge, to_edge, vclass=vclass)
+        if not conns:
+            return None
+        src = [ln.index for ln in self.lanes_of(from_edge) if ln.allows(vclass)]
+        dst = [ln.index for ln in self.lanes_of(to_edge) if ln.allows(vclass)]
+        if not src or not dst:
+            return None
+        mine = [c for c in conns if via is not None and via in c.via]
+        if not mine:
+            here = src[min(max(lane, 0), len(src) - 1)]
+            near = min(abs(c.from_lane - here) for c in conns)
+            mine = [c for c in conns if abs(c.from_lane - here) == near]
+        order = {idx: k for k, idx in enumerate(dst)}
+        picks = [order[c.to_lane] for c in mine if c.to_lane in order]
+        if not picks:
+            return None
+        return min(picks, key=lambda k: (abs(k - lane), k))
+
     def graph(self, vclass: str) -> ClassGraph:
         """The edge graph of ``vclass`` (built on first use, then cached)."""
         g = self._graphs.get(vclass)

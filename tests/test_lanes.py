@@ -4,9 +4,12 @@ traffic (``splineplan.closedloop.lanes``), on plain corridors."""
 from __future__ import annotations
 
 import numpy as np
+from conftest import NETS
 
 from splineplan.closedloop.lanes import ONTO_INSET, lane_band, onto_road
 from splineplan.corridor import Corridor
+from splineplan.network import load_network, route_corridor
+from splineplan.route import Route
 
 
 def _street(length: float = 100.0, lanes: int = 2, width: float = 3.2) -> Corridor:
@@ -39,6 +42,43 @@ def test_lane_band_changes_to_the_lane_the_route_needs() -> None:
     assert np.isclose(lo[0], -2.3) and np.isclose(hi[0], -0.9)  # its lane
     assert np.isclose(lo[1], 0.9) and np.isclose(hi[1], 2.3)  # the lane that leads on
     assert np.isclose(lo[2], 0.9) and np.isclose(hi[2], 2.3)
+
+
+def test_lane_after_follows_sumo_connections() -> None:
+    """At the city's junction A1, a left turn from the north and a right turn from the
+    south both lead into the two-lane street east: SUMO's connections put the left turn
+    on its left lane and the right turn on its right one (no conflict between them)."""
+    net = load_network(NETS / "city.net.xml")
+    assert net.lane_after("A2A1", 0, "A1B1", "passenger") == 1
+    assert net.lane_after("A0A1", 0, "A1B1", "passenger") == 0
+    # in the junction, the internal lane under the vehicle decides
+    assert net.lane_after("A2A1", 0, "A1B1", "passenger", via=":A1_4_0") == 1
+    assert net.lane_after("A1A0", 0, "A0B0", "passenger") is None  # not joined
+
+
+def test_lane_band_comes_out_of_a_turn_on_the_lane_the_connection_leads_to() -> None:
+    """Out of the left turn at A1 the band holds the street's left lane, as SUMO's
+    connection does (the right turn from the other side comes out on the right lane);
+    the same index on the street after (the right lane) would cut across that turn."""
+    net = load_network(NETS / "city.net.xml")
+    c = route_corridor(net, Route(("A2A1", "A1B1"), 0.0, 0.0, "length", "passenger"))
+
+    def leads_to(k: int, lane: int) -> int | None:
+        return net.lane_after(c.edges[k], lane, c.edges[k + 1], "passenger")
+
+    after = np.array([c.edge_starts[1] + 2.0, c.edge_starts[1] + 30.0, c.length - 5.0])
+    right, _ = c.bounds_at(after)
+    for links, lane in (({}, 0), ({"leads_to": leads_to}, 1)):
+        band = lane_band(c, 50.0, 0.0, lane_width=3.2, half_width=0.9, **links)
+        lo, hi = band.keep_at(after)
+        assert np.allclose(lo - right, 3.2 * lane + 0.9, atol=0.05)
+        assert np.allclose(hi - right, 3.2 * lane + 2.3, atol=0.05)
+    # in the junction, the lane its internal lane leads to, wherever its centre lies
+    mid = 0.5 * (c.edge_ends[0] + c.edge_starts[1])
+    band = lane_band(c, mid, float(c.bounds_at(mid)[0]) + 0.3, lane_width=3.2,
+                     half_width=0.9, arrive=1)
+    lo, _ = band.keep_at(after)
+    assert np.allclose(lo - right, 3.2 + 0.9, atol=0.05)
 
 
 def test_onto_road_moves_a_start_just_outside_back_in() -> None:

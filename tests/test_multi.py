@@ -304,6 +304,32 @@ def test_planned_vehicle_keeps_to_its_lane_among_sumo_traffic(tmp_path: Path) ->
     assert r.vehicles["p"].metrics["time_off_road"] == 0.0
 
 
+def test_planned_vehicle_turns_into_the_lane_its_connection_leads_to(tmp_path: Path) -> None:
+    """At the city's junction A1 a planned car turns left into the two-lane street east
+    while a SUMO car turns right into it from the other side: SUMO's connections put the
+    left turn on the street's left lane and the right turn on its right one. The planned
+    car comes out on the left lane and stays there (it would otherwise cut across the
+    right turn), and the two never touch."""
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text("""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vehicle id="p" depart="0" departPos="80" departSpeed="max" type="car">
+  <route edges="A2A1 A1B1"/></vehicle>
+<vehicle id="q" depart="0" departPos="90" departSpeed="max" type="car">
+  <route edges="A0A1 A1B1"/></vehicle>
+</routes>""")
+    sc = sumo_scenario(net=NETS / "city.net.xml", routes=(rou,), duration=40.0)
+    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    d = r.vehicles["p"].driven
+    after = [str(lane) for lane in d["lane"] if str(lane).startswith("A1B1")]
+    assert len(after) > 20
+    assert set(after) == {"A1B1_1"}
+    assert r.metrics["pairs"]["collision_pairs_planned"] == []
+    q_lanes = {str(v.get("lane")) for v in ET.parse(tmp_path / "out" / "fcd.xml").iter("vehicle")
+               if v.get("id") == "q"}
+    assert "A1B1_0" in q_lanes
+
+
 def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
     """A car crawls just beyond a junction: a planned vehicle coming up behind it stops
     before the junction, as SUMO's drivers do, rather than in it, where it would stand in

@@ -14,11 +14,16 @@ obstacle falls back to the whole road (the roadmap's own rule for keep offsets).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
 
 from splineplan.corridor import UNBOUNDED, Corridor
+from splineplan.geometry import FloatArray
+
+#: ``leads_to(k, lane)`` of :func:`lane_band`.
+LeadsTo = Callable[[int, int], "int | None"]
 
 #: Stations [m] before a needed change of lane from which the band holds the lane the
 #: route needs (the room for the change).
@@ -28,7 +33,8 @@ MIN_SLACK = 0.2
 
 
 def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: float,
-              half_width: float) -> Corridor:
+              half_width: float, leads_to: LeadsTo | None = None,
+              arrive: int | None = None) -> Corridor:
     """``window`` with its keep offsets narrowed to one lane on each edge.
 
     Parameters
@@ -38,8 +44,16 @@ def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: f
     station, lateral
         The vehicle's centre on ``window`` [m]: its lane on the current edge (in a
         junction, on the edge it comes out on) is the one this lies in, counted from the
-        right boundary in lanes of ``lane_width`` [m]; on the edges after, the lane of the
+        right boundary in lanes of ``lane_width`` [m].
+    leads_to
+        ``leads_to(k, lane)``: the lane of the window's edge ``k + 1`` that lane ``lane``
+        of its edge ``k`` leads to (SUMO's connections: a left turn into a street of two
+        lanes comes out on the left one, beside a right turn coming out on the right one),
+        ``None`` if not known; without it, or where it does not know, the lane of the
         same index (or the leftmost, on fewer lanes).
+    arrive
+        In a junction: the lane of the edge it comes out on that its connection leads to
+        (instead of the one its centre lies in).
     half_width
         Half the vehicle's width [m]: the centre keeps ``lane_width / 2 - half_width``
         (at least :data:`MIN_SLACK`) from the lane's centre line.
@@ -58,13 +72,16 @@ def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: f
     gaps = (list(zip(window.edge_ends[:-1].tolist(), window.edge_starts[1:].tolist(),
                      strict=True)) if len(window.edge_ends) else [])  # the junctions
     at = station
+    inside = False
     for end, nxt in gaps:
         if end < station < nxt:  # in a junction: the lane it comes out on
-            at = nxt
+            at, inside = nxt, True
     r0, l0 = window.bounds_at(at)
     here = int(np.clip(math.floor((lateral - float(r0)) / lane_width), 0,
                        max(round((float(l0) - float(r0)) / lane_width), 1) - 1))
-    index = np.minimum(float(here), lanes - 1.0)
+    if inside and arrive is not None:
+        here = arrive
+    index = np.minimum(_lanes_along(window, at, here, leads_to), lanes - 1.0)
     slack = max(0.5 * lane_width - half_width, MIN_SLACK)
     centre = right + (index + 0.5) * lane_width
     b_lo, b_hi = centre - slack, centre + slack
@@ -94,6 +111,25 @@ def lane_band(window: Corridor, station: float, lateral: float, *, lane_width: f
         return window
     return replace(window, keep_left=np.minimum(new_hi, UNBOUNDED),
                    keep_right=np.maximum(new_lo, -UNBOUNDED))
+
+
+def _lanes_along(window: Corridor, at: float, here: int, leads_to: LeadsTo | None
+                 ) -> FloatArray:
+    """The lane index at each station of ``window``: ``here`` on the edge at station
+    ``at`` and before it, and on each edge after it the lane the one before leads to
+    (``leads_to``; the same index where that is not known)."""
+    s = window.s
+    out = np.full(len(s), float(here))
+    starts = window.edge_starts
+    if leads_to is None or len(starts) < 2:
+        return out
+    k0 = max(int(np.searchsorted(starts, at, side="right")) - 1, 0)
+    lane = here
+    for k in range(k0, len(starts) - 1):
+        nxt = leads_to(k, lane)
+        lane = lane if nxt is None else nxt
+        out[s >= starts[k + 1]] = float(lane)
+    return out
 
 
 #: How far [m] a vehicle's centre outside the corridor may be moved back onto it to plan

@@ -285,7 +285,8 @@ class Replanning(Perception):
                     return False, TrajectoryError(f"no lanes known for edge "
                                                   f"'{self._edge_at(self.station)}'")
                 window = lane_band(window, self.station - s0, self.lateral,
-                                   lane_width=width, half_width=ego.width / 2.0)
+                                   lane_width=width, half_width=ego.width / 2.0,
+                                   **self._lane_links(window))
             start = onto_road(window, (float(self.pose[0]), float(self.pose[1])))
             if start is not None:
                 log.info("t=%.1f '%s' is off its corridor: planning from %.2f m away, on "
@@ -341,6 +342,32 @@ class Replanning(Perception):
         else:
             self.own_plan = None
         return True, None
+
+    def _lane_links(self, window: Corridor) -> dict[str, Any]:
+        """:func:`.lanes.lane_band`'s ``leads_to`` over ``window``'s edges, by SUMO's
+        connections, and in a junction its ``arrive``: the lane that SUMO's internal lane
+        under the vehicle leads to."""
+        net, cls, edges = self.net, self.sc.ego.vclass, window.edges
+
+        def leads_to(k: int, lane: int) -> int | None:
+            a, b = edges[k], edges[k + 1]
+            if not a or not b:
+                return None
+            try:
+                return net.lane_after(a, lane, b, cls)
+            except (LookupError, SplineplanError):
+                return None
+
+        arrive = None
+        if self.last_lane.startswith(":"):
+            junction = self.corridor.junction_at(self.station) if self.corridor else None
+            if junction is not None:
+                try:
+                    arrive = net.lane_after(junction[0], 0, junction[1], cls,
+                                            via=self.last_lane)
+                except (LookupError, SplineplanError):
+                    arrive = None
+        return {"leads_to": leads_to, "arrive": arrive}
 
     def _lane_width(self) -> float | None:
         """Width [m] of the lanes of the route's edge where the vehicle is (``None``: none
