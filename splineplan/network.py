@@ -207,6 +207,8 @@ class RoadNetwork:
     _graphs: dict[str, ClassGraph] = field(default_factory=dict, repr=False)
     #: bands of route corridors by the lanes they span (see :func:`route_corridor`)
     _bands: dict[tuple[str, ...], Any] = field(default_factory=dict, repr=False)
+    #: the connection over each internal lane (see :meth:`connection_via`)
+    _vias: dict[str, Connection] = field(default_factory=dict, repr=False)
 
     @property
     def n_edges(self) -> int:
@@ -245,6 +247,26 @@ class RoadNetwork:
         except KeyError:
             raise UnknownEdgeError(f"internal lane '{lane_id}' is not in network "
                                    f"{self.path.name}") from None
+
+    def lane(self, lane_id: str) -> Lane:
+        """A lane of a normal or internal edge by id."""
+        if lane_id.startswith(":"):
+            return self.internal_lane(lane_id)
+        edge, _, index = lane_id.rpartition("_")
+        lanes = self.lanes_of(edge)
+        try:
+            return next(ln for ln in lanes if ln.index == int(index))
+        except (StopIteration, ValueError):
+            raise UnknownEdgeError(f"lane '{lane_id}' is not in network "
+                                   f"{self.path.name}") from None
+
+    def connection_via(self, internal_lane: str) -> Connection | None:
+        """The connection that runs over an internal lane (``None``: none does)."""
+        if not self._vias and self.connections:
+            for c in self.connections:
+                for via in c.via:
+                    self._vias.setdefault(via, c)
+        return self._vias.get(internal_lane)
 
     def connections_between(self, from_edge: str, to_edge: str, *,
                             vclass: str | None = None) -> tuple[Connection, ...]:

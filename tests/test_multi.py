@@ -330,6 +330,30 @@ def test_planned_vehicle_turns_into_the_lane_its_connection_leads_to(tmp_path: P
     assert "A1B1_0" in q_lanes
 
 
+@pytest.mark.parametrize("car_pos", [50.0, 62.0])
+def test_planned_vehicle_gives_way_to_a_bus_body_sweeping_through_a_turn(
+        tmp_path: Path, car_pos: float) -> None:
+    """At the city's junction E0 a 12 m bus turns left from the west while a planned car
+    turns right from the north: SUMO's connections are no foes, but the bus's body cuts
+    across the inside of its turn, over the car's way. The planned car waits until the
+    body has passed, and keeps the safety margin from it (without this it was hit)."""
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text(f"""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vType id="bus" length="12" width="2.5" vClass="bus"/>
+<vehicle id="b" depart="0" departPos="60" departSpeed="8" type="bus">
+  <route edges="D0E0 E0E1"/></vehicle>
+<vehicle id="p" depart="0" departPos="{car_pos}" departSpeed="max" type="car">
+  <route edges="E1E0 E0D0"/></vehicle>
+</routes>""")
+    sc = sumo_scenario(net=NETS / "city.net.xml", routes=(rou,), duration=25.0)
+    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    pairs = r.metrics["pairs"]
+    assert pairs["collision_pairs_planned"] == []
+    assert pairs["min_gap_planned"]["value"] >= 0.5 * sc.roadmap.safety_margin
+    assert r.vehicles["p"].status == "arrived"
+
+
 def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
     """A car crawls just beyond a junction: a planned vehicle coming up behind it stops
     before the junction, as SUMO's drivers do, rather than in it, where it would stand in

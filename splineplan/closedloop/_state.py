@@ -86,6 +86,7 @@ class DriverState:
     conflicts: list[dict[str, Any]]
     signals: Signals
     _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
+    _body_paths: dict[tuple[str, str], Any]  # (lane, via) -> (bodies.BodyPath, lane) | None
     _pl: tuple[list[float], ...]
     _pl_np: tuple[FloatArray, FloatArray]
     _times_key: tuple[float, float] | None

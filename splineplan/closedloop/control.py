@@ -12,9 +12,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splineplan.closedloop.bodies import (
+    HORIZON,
+    MOVING,
+    BodyPath,
+    bodies_along,
+    body_path,
+    meeting,
+)
 from splineplan.closedloop.cooperate import CROSSING
 from splineplan.closedloop.perception import Perception, _interp, _locate
-from splineplan.sumo.world import Signals
+from splineplan.errors import SplineplanError
+from splineplan.sumo.world import LanePlace, Signals
 from splineplan.traffic import first_in_reach, probe_points, safe_speed
 
 #: A planned vehicle within this distance [m] of where its published plan puts it keeps to
@@ -189,6 +198,9 @@ class Control(Perception):
             cap, self.why_slow = red, "stopping at a red light"
         if give < cap:
             cap = give  # (why_slow set by _yield_speed)
+        body = self._body_speed(cap)
+        if body < cap:
+            cap = body  # (why_slow set by _body_speed)
         return cap, int(math.isfinite(cap))
 
     def _keep_clear_speed(self, stop_front: float) -> float:
@@ -286,6 +298,83 @@ class Control(Perception):
                 self.why_slow = (f"giving way at a junction to vehicle '{foe.id}', as "
                                  "SUMO's right of way says")
         return cap
+
+    def _body_speed(self, cap: float) -> float:
+        """Speed cap [m/s] that gives way to the bodies of long vehicles sweeping through
+        a junction (:mod:`.bodies`): where one, driving on along its lanes, comes within
+        the safety margin of the ego's footprint on its path ahead within
+        :data:`~.bodies.HORIZON`, and the ego would be there within :data:`YIELD_GAP` of
+        the time the body is, the ego stops before that place, if it still can at its
+        emergency braking (else it goes on, to clear it). Only caps below ``cap`` are
+        looked for."""
+        places = self.signals.long
+        if not places or self.traj is None or cap <= 0.0:
+            return math.inf
+        sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
+        o = self.others
+        where = {vid: i for i, vid in enumerate(o.ids)}
+        s = self.full_s
+        lo = max(int(np.searchsorted(s, self.u, side="right")) - 1, 0)
+        hi = int(np.searchsorted(s, self.u + max(self.v * HORIZON, 0.0) + ego.length + 10.0))
+        if hi - lo < 1:
+            return math.inf
+        path_s, path_xy, path_h = s[lo:hi], self.full_xy[lo:hi], self.full_heading[lo:hi]
+        out = math.inf
+        for place in places:
+            i = where.get(place.id)
+            if i is None or place.speed < MOVING:
+                continue
+            found = self._body_path(place)
+            if found is None:
+                continue
+            path, index = found
+            at = path.station(index, place.pos)
+            length, width = float(o.length[i]), float(o.width[i])
+            if index == 0 and at + place.speed * HORIZON < float(path.starts[1]):
+                continue  # does not reach the junction within the horizon
+            times, centres, heads = bodies_along(path, at, place.speed, length)
+            met = meeting(times, centres, heads, (length, width), path_s, path_xy, path_h,
+                          (ego.length, ego.width), sc.roadmap.safety_margin)
+            if met is None:
+                continue
+            s_in, s_out, t_in_b, t_out_b = met
+            if t_out_b >= float(times[-1]) - 1e-9:
+                t_out_b = math.inf  # still there at the horizon
+            ahead = s_in - self.u
+            if ahead <= 0.0 or self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * ahead:
+                continue  # in its way already, or cannot stop before: clear it
+            room = ahead - YIELD_STOP
+            t_in = self._time_along_plan(s_in - self.u)
+            t_out = self._time_along_plan(s_out - self.u)
+            if t_in - YIELD_GAP >= t_out_b or t_in_b >= t_out + YIELD_GAP:
+                continue
+            c = math.sqrt(max(2.0 * tp.b_max * (room - self.v * self.dt), 0.0))
+            if c < min(out, cap):
+                out = c
+                self.why_slow = (f"giving way to the body of vehicle '{place.id}' sweeping "
+                                 "through the junction")
+        return out
+
+    def _body_path(self, place: LanePlace) -> tuple[BodyPath, int] | None:
+        """The lanes a long vehicle's front follows through the next junction (the lane
+        before it, its internal lanes and the lane after), and which of them it is on;
+        ``None`` where it approaches none. Kept per lane and internal lane."""
+        key = (place.lane, place.via)
+        if key in self._body_paths:
+            return self._body_paths[key]
+        net, found = self.net, None
+        try:
+            c = net.connection_via(place.lane if place.lane.startswith(":") else place.via)
+            if c is not None:
+                chain = [f"{c.from_edge}_{c.from_lane}", *c.via, f"{c.to_edge}_{c.to_lane}"]
+                if place.lane in chain:
+                    lanes = [net.lane(lane) for lane in chain]
+                    found = (body_path([(ln.shape, ln.length) for ln in lanes]),
+                             chain.index(place.lane))
+        except (LookupError, SplineplanError):
+            found = None
+        self._body_paths[key] = found
+        return found
 
     def _time_along_plan(self, dist: float) -> float:
         """Time [s] the ego takes to drive ``dist`` [m] along its plan from where it is,

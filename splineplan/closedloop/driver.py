@@ -19,6 +19,7 @@ from typing import Any, Literal, get_args
 
 import numpy as np
 
+from splineplan.closedloop.bodies import BodyPath
 from splineplan.closedloop.control import Control
 from splineplan.closedloop.replan import Replan, Replanning
 from splineplan.corridor import Corridor
@@ -95,6 +96,7 @@ class Driver(Replanning, Control):
         self.check_seconds = 0.0  # wall time [s] of the safety checks
         self.plan_seconds = 0.0  # wall time [s] of the planning calls
         self._obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]] = {}
+        self._body_paths: dict[tuple[str, str], tuple[BodyPath, int] | None] = {}
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.station = 0.0
         self.deviation = 0.0

@@ -27,7 +27,10 @@ from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from splineplan._signals import sigint_deferred, sigint_ignored
+from splineplan.closedloop.bodies import LONG_VEHICLE
 from splineplan.closedloop.control import EMERGENCY_FACTOR, YIELD_STOP
 from splineplan.closedloop.cooperate import Published
 from splineplan.closedloop.driver import DRIVERS, Driver, DriverKind
@@ -361,7 +364,11 @@ class _Run:
         for d in self.drivers:
             if not (d.in_sim and d.kind == "planner"):
                 continue
-            mv = d.command(self.world.signals(d.ego, d.sc.sim.lookahead, near=YIELD_STOP))
+            o = d.others
+            long = (tuple(o.ids[i] for i in np.flatnonzero(o.length >= LONG_VEHICLE).tolist())
+                    if o.n else ())
+            mv = d.command(self.world.signals(d.ego, d.sc.sim.lookahead, near=YIELD_STOP,
+                                              long=long))
             try:
                 self.world.move(d.ego, mv.edge, mv.lane, mv.centre, mv.heading,
                                 d.sc.ego.length, mv.speed)

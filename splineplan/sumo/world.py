@@ -94,13 +94,28 @@ class JunctionFoe:
 
 
 @dataclass(frozen=True)
+class LanePlace:
+    """Where SUMO has a vehicle: its lane, its front's position on it [m] (SUMO's lane
+    position), its speed [m/s], and the internal lane it approaches next (``""`` if none,
+    or if it is on an internal lane)."""
+
+    id: str
+    lane: str
+    pos: float
+    speed: float
+    via: str
+
+
+@dataclass(frozen=True)
 class Signals:
     """What lies ahead of a planned vehicle at junctions: traffic lights
-    ``(id, link index, distance [m], state)`` in order, and junction foes (``None``: SUMO
-    cannot say, e.g. the vehicle is off its route)."""
+    ``(id, link index, distance [m], state)`` in order, junction foes (``None``: SUMO
+    cannot say, e.g. the vehicle is off its route), and where the long vehicles around
+    it are on their lanes."""
 
     lights: tuple[tuple[Any, ...], ...] | None
     foes: tuple[JunctionFoe, ...] | None
+    long: tuple[LanePlace, ...] = ()
 
 
 def sumo_message(err: BaseException) -> str:
@@ -130,6 +145,9 @@ class World:
         #: length and width [m] of each vehicle seen around a planned one (they do not
         #: change; read once instead of with every context subscription result)
         self._sizes: dict[str, tuple[float, float]] = {}
+        #: the places read this step (:meth:`places`)
+        self._places_at = math.nan
+        self._places: dict[str, LanePlace] = {}
 
     # -- start and stop ------------------------------------------------------------------------
     def start(self, args: list[str], *, log_file: Path | None = None) -> None:
@@ -299,9 +317,11 @@ class World:
                      dtype=float)
         return Others(ids, a, stopped_speed)
 
-    def signals(self, vid: str, lookahead: float, *, near: float = 0.0) -> Signals:
+    def signals(self, vid: str, lookahead: float, *, near: float = 0.0,
+                long: tuple[str, ...] = ()) -> Signals:
         """Traffic lights and junction foes ahead of ``vid`` within ``lookahead`` [m]: the
-        foes it must yield to, farther than ``near`` [m] from their conflict area."""
+        foes it must yield to, farther than ``near`` [m] from their conflict area; and
+        where the vehicles ``long`` are on their lanes (:meth:`places`)."""
         s = self.sumo
         t0 = time.perf_counter()
         try:
@@ -325,7 +345,34 @@ class World:
             assert foes is not None
             foes.append(JunctionFoe(f[0], f[1], f[2], f[3], f[4], bool(f[7]), v_f, len_f))
         self.seconds += time.perf_counter() - t0
-        return Signals(lights, None if foes is None else tuple(foes))
+        return Signals(lights, None if foes is None else tuple(foes),
+                       self.places(long) if long else ())
+
+    def places(self, vids: tuple[str, ...]) -> tuple[LanePlace, ...]:
+        """Where SUMO has each of ``vids`` (read once a step, whichever planned vehicle
+        asks; those no longer in SUMO left out)."""
+        t0 = time.perf_counter()
+        if self._places_at != self.time:
+            self._places_at, self._places = self.time, {}
+        veh, out = self.sumo.vehicle, []
+        for vid in vids:
+            place = self._places.get(vid)
+            if place is None:
+                try:
+                    lane = veh.getLaneID(vid)
+                    via = ""
+                    if lane and not lane.startswith(":"):
+                        links = veh.getNextLinks(vid)
+                        via = links[0][4] if links else ""
+                    place = LanePlace(vid, lane, float(veh.getLanePosition(vid)),
+                                      float(veh.getSpeed(vid)), via)
+                except Exception:
+                    continue
+                self._places[vid] = place
+            if place.lane:
+                out.append(place)
+        self.seconds += time.perf_counter() - t0
+        return tuple(out)
 
     def move(self, vid: str, edge: str, lane: int, centre: tuple[float, float], heading: float,
              length: float, speed: float) -> None:
