@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from conftest import NETS
 
-from splineplan.closedloop.lanes import ONTO_INSET, lane_band, onto_road
+from splineplan.closedloop.lanes import ONTO_INSET, lane_band, lane_entry, onto_road, side_reach
 from splineplan.corridor import Corridor
 from splineplan.network import load_network, route_corridor
 from splineplan.route import Route
@@ -79,6 +79,27 @@ def test_lane_band_comes_out_of_a_turn_on_the_lane_the_connection_leads_to() -> 
                      half_width=0.9, arrive=1)
     lo, _ = band.keep_at(after)
     assert np.allclose(lo - right, 3.2 + 0.9, atol=0.05)
+
+
+def test_lane_entry_finds_where_the_footprint_reaches_over_the_line() -> None:
+    """A path from the middle of the left lane of two (3.2 m) drifting right: its 1.8 m
+    wide footprint reaches over the line between them where its centre comes within
+    0.9 m (plus the slack) of it, or sooner where it heads across the line (shapely's
+    rotated rectangle for the reach)."""
+    from shapely.affinity import rotate
+    from shapely.geometry import box
+
+    lateral = np.linspace(4.8, 1.6, 33)  # from the left lane's centre to the right's
+    right = np.zeros(33)
+    square = np.full(33, 0.9)
+    k, lane = lane_entry(lateral, right, square, lane_width=3.2) or (-1, -1)
+    assert lane == 0 and lateral[k] - 0.9 < 3.2 - 0.1 <= lateral[k - 1] - 0.9
+    turned = side_reach(np.full(33, -0.25), 2.25, 0.9)
+    rect = rotate(box(-2.25, -0.9, 2.25, 0.9), -0.25, use_radians=True)
+    assert np.isclose(turned[0], -rect.bounds[1]) and np.isclose(turned[0], rect.bounds[3])
+    k2, _ = lane_entry(lateral, right, turned, lane_width=3.2) or (-1, -1)
+    assert 0 <= k2 < k
+    assert lane_entry(np.full(5, 4.8), np.zeros(5), np.full(5, 0.9), lane_width=3.2) is None
 
 
 def test_onto_road_moves_a_start_just_outside_back_in() -> None:

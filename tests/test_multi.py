@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import NETS, ROOT
+from shapely.geometry import LineString, Polygon
 
 from splineplan import cli
 from splineplan.errors import ParameterError, ScenarioError
@@ -352,6 +353,50 @@ def test_planned_vehicle_gives_way_to_a_bus_body_sweeping_through_a_turn(
     assert pairs["collision_pairs_planned"] == []
     assert pairs["min_gap_planned"]["value"] >= 0.5 * sc.roadmap.safety_margin
     assert r.vehicles["p"].status == "arrived"
+
+
+def test_planned_vehicle_changes_lanes_only_into_a_gap(tmp_path: Path) -> None:
+    """A planned car in the left lane of a two-lane street must change to the right lane
+    for its right turn at the end, while SUMO's cars stream past in the right lane at
+    13-14 m/s, 2 s apart: it waits in its lane for a gap and changes into it. While its
+    footprint reaches over the line between the lanes, it keeps a quarter of a metre
+    from every car in the right lane (shapely footprints from SUMO's FCD; without the
+    wait it let a car pass 0.1 m from its side)."""
+    rou = tmp_path / "r.rou.xml"
+    cars = [(2.0 * k, f'<vehicle id="c{k}" depart="{2.0 * k:g}" departLane="0" departPos="5" '
+             'departSpeed="max" type="car"><route edges="A1B1 B1C1 C1D1"/></vehicle>')
+            for k in range(8)]
+    cars.append((4.0, '<vehicle id="p" depart="4" departLane="1" departPos="20" '
+                      'departSpeed="max" type="car"><route edges="A1B1 B1C1 C1C0"/></vehicle>'))
+    rou.write_text('<routes>\n<vType id="car" length="4.5" width="1.8" vClass="passenger" '
+                   'lcStrategic="-1" lcSpeedGain="0" lcKeepRight="0"/>\n'
+                   + "\n".join(v for _, v in sorted(cars, key=lambda c: c[0]))
+                   + "\n</routes>")
+    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=60.0)
+    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    assert r.metrics["pairs"]["collision_pairs_planned"] == []
+    assert r.vehicles["p"].status == "arrived"
+    net = sumolib.net.readNet(str(NETS / "grid.net.xml"))
+    line = LineString(net.getLane("B1C1_0").getShape()).parallel_offset(1.6, "left")
+
+    def body(v: ET.Element) -> Polygon:
+        h = np.radians(90.0 - float(v.get("angle", 0.0)))
+        u, n = np.array([np.cos(h), np.sin(h)]), np.array([-np.sin(h), np.cos(h)])
+        f = np.array([float(v.get("x", 0.0)), float(v.get("y", 0.0))])
+        return Polygon([f + 0.9 * n, f - 0.9 * n, f - 4.5 * u - 0.9 * n, f - 4.5 * u + 0.9 * n])
+
+    across = 0
+    for step in ET.parse(tmp_path / "out" / "fcd.xml").iter("timestep"):
+        vs = {str(v.get("id")): v for v in step.iter("vehicle")}
+        p = vs.get("p")
+        if p is None or not str(p.get("lane")).startswith("B1C1") or not body(p).intersects(
+                line):
+            continue
+        across += 1
+        for k, v in vs.items():
+            if k != "p" and v.get("lane") == "B1C1_0":
+                assert body(p).distance(body(v)) >= 0.25, (step.get("time"), k)
+    assert across > 5  # it did change lanes
 
 
 def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:

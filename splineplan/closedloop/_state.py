@@ -74,6 +74,7 @@ class DriverState:
     publish: bool
     keep_plans: bool
     keep_lane: bool
+    lane_change: tuple[float, int, float] | None  # plan station, lane, lane width [m]
     keep_clear: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
     own_plan: Any  # the same, kept after the run took it to the board

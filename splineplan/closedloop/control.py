@@ -40,6 +40,12 @@ YIELD_STOP = 1.0
 QUEUE_SPEED = 1.0
 #: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
 STOPPED_FOE_SPEED = 0.1
+#: A lane change waits for a gap of this time [s] at the speed of the one behind (the
+#: ego's ahead), at least :data:`CHANGE_MIN_GAP` [m], to the vehicles within
+#: :data:`CHANGE_LOOK` [m] in the lane it changes into.
+CHANGE_GAP_TIME = 1.0
+CHANGE_MIN_GAP = 1.0
+CHANGE_LOOK = 60.0
 #: The closed loop's emergency deceleration, a multiple of the planner's ``b_max``: the
 #: speed control brakes up to this hard when something comes into the ego's path (and SUMO's
 #: vehicle type of the ego has it as its ``emergencyDecel``).
@@ -201,6 +207,9 @@ class Control(Perception):
         body = self._body_speed(cap)
         if body < cap:
             cap = body  # (why_slow set by _body_speed)
+        change = self._change_speed()
+        if change < cap:
+            cap = change  # (why_slow set by _change_speed)
         return cap, int(math.isfinite(cap))
 
     def _keep_clear_speed(self, stop_front: float) -> float:
@@ -354,6 +363,57 @@ class Control(Perception):
                 self.why_slow = (f"giving way to the body of vehicle '{place.id}' sweeping "
                                  "through the junction")
         return out
+
+    def _change_speed(self) -> float:
+        """Speed cap [m/s] that waits for a gap before changing lanes: where the plan
+        reaches into the next lane ahead (``lane_change``), a vehicle in that lane which,
+        at its speed, will be less than the gap behind or ahead of where the ego then is
+        (:data:`CHANGE_GAP_TIME` at the follower's speed, and the room the follower needs
+        to brake to the ego's speed) holds the ego back before that place, if it can
+        still stop there at its emergency braking."""
+        ch = self.lane_change
+        o = self.others
+        if ch is None or self.traj is None or not o.n or self.corridor is None:
+            return math.inf
+        u_enter, lane, width = ch
+        tp, ego = self.sc.trajectory, self.sc.ego
+        ahead = u_enter - self.u
+        if self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * max(ahead, 0.0):
+            return math.inf  # cannot stop before
+        if ahead <= 0.0 and self.last_lane.endswith(f"_{lane}"):
+            return math.inf  # SUMO has it in that lane: changing already
+        x, y = float(self.pose[0]), float(self.pose[1])
+        near = np.flatnonzero((~o.stopped) & (np.hypot(o.cx - x, o.cy - y) < CHANGE_LOOK))
+        if not len(near):
+            return math.inf
+        c = self.corridor
+        sl = np.atleast_2d(self._project(np.column_stack((o.cx[near], o.cy[near])),
+                                         back=CHANGE_LOOK + 10.0, ahead=CHANGE_LOOK + 10.0))
+        right, _ = c.bounds_at(np.clip(sl[:, 0], 0.0, c.length))
+        there = np.floor((sl[:, 1] - right) / width) == lane
+        if not there.any():
+            return math.inf
+        t_e = self._time_along_plan(ahead)
+        ps, _, _, _, pv2 = self._pl
+        v_e = min(math.sqrt(max(_interp(u_enter, ps, pv2), 0.0)),
+                  math.sqrt(self.v * self.v + 2.0 * tp.a_max * ahead))
+        s_e = self.station + ahead
+        for j, (s_o, _) in zip(near[there].tolist(), sl[there].tolist(), strict=True):
+            v_o = max(float(o.speed[j]), 0.0)
+            d = s_o + v_o * t_e - s_e
+            half = 0.5 * (float(o.length[j]) + ego.length)
+            if d >= 0.0:  # ahead of the ego then
+                short = d - half < max(CHANGE_MIN_GAP, v_e * CHANGE_GAP_TIME)
+            else:  # behind: it must keep its gap, braking to the ego's speed
+                need = v_o * CHANGE_GAP_TIME + max(v_o - v_e, 0.0) ** 2 / (2.0 * tp.b_max)
+                short = -d - half < max(CHANGE_MIN_GAP, need)
+            if short:
+                self.why_slow = (f"waiting for a gap to change lanes (vehicle '{o.ids[j]}' "
+                                 "in the lane)")
+                # stop before the place; one that reaches over the line already stands
+                return math.sqrt(max(2.0 * tp.b_max * (ahead - YIELD_STOP - self.v * self.dt),
+                                     0.0))
+        return math.inf
 
     def _body_path(self, place: LanePlace) -> tuple[BodyPath, int] | None:
         """The lanes a long vehicle's front follows through the next junction (the lane

@@ -109,6 +109,7 @@ class Driver(Replanning, Control):
         self.publish = False  # whether it publishes its plans (several planned vehicles)
         self.keep_plans = True  # keep every plan for pictures (a single ego's run)
         self.keep_lane = False  # plan within its lane first (among SUMO's traffic)
+        self.lane_change: tuple[float, int, float] | None = None  # see Replanning._take
         self.keep_clear = False  # stop before a junction it could not leave
         self.published_plan: Any = None
         self.own_plan: Any = None  # its latest published plan (kept)

@@ -159,3 +159,38 @@ def onto_road(window: Corridor, xy: tuple[float, float]) -> tuple[float, float] 
         return None
     x, y = (float(v) for v in window.to_xy(np.array([s]), np.array([new]))[0])
     return x, y
+
+
+#: Slack [m] by which a footprint may reach over a lane line before it counts as in the
+#: next lane.
+LINE_SLACK = 0.1
+
+
+def lane_entry(lateral: FloatArray, right: FloatArray, reach: FloatArray, *,
+               lane_width: float) -> tuple[int, int] | None:
+    """Where a path first reaches into another lane: the index of the first of its samples
+    (centre offsets ``lateral`` [m], road's right boundary ``right`` [m] at each, along one
+    edge) whose footprint, reaching ``reach`` [m] to each side of its centre, reaches
+    over a line of the lane its first sample's centre is in (by more than
+    :data:`LINE_SLACK`), and that lane's index (counted from the right, in lanes of
+    ``lane_width`` [m]); ``None`` if it stays in its lane."""
+    if not len(lateral) or lane_width <= 0.0:
+        return None
+    rel = np.asarray(lateral, dtype=float) - np.asarray(right, dtype=float)
+    here = math.floor(float(rel[0]) / lane_width)
+    lo, hi = here * lane_width, (here + 1) * lane_width
+    out_left = rel + reach > hi + LINE_SLACK
+    out_right = rel - reach < lo - LINE_SLACK
+    out = out_left | out_right
+    if not out.any():
+        return None
+    k = int(np.argmax(out))
+    return k, here + 1 if out_left[k] else here - 1
+
+
+def side_reach(relative_heading: FloatArray, half_length: float, half_width: float
+               ) -> FloatArray:
+    """How far [m] a rectangle's footprint reaches to each side of its centre across a
+    line it heads ``relative_heading`` [rad] away from."""
+    a = np.abs(np.sin(relative_heading))
+    return half_width * np.sqrt(1.0 - a * a) + half_length * a

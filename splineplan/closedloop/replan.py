@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from splineplan.closedloop.cooperate import WAIT_REPLAN, keeps_clear_of, plans_before
-from splineplan.closedloop.lanes import lane_band, onto_road
+from splineplan.closedloop.lanes import lane_band, lane_entry, onto_road, side_reach
 from splineplan.closedloop.perception import Perception
 from splineplan.corridor import Corridor
 from splineplan.errors import (
@@ -501,6 +501,40 @@ class Replanning(Perception):
         d = np.hypot(*(self.path_xy - self.pose[:2]).T)
         self.u = float(u[int(np.argmin(d[: max(1, int(5.0 / _PATH_SPACING))]))])
         self.window_end = window_end
+        self.lane_change = self._lane_change_ahead() if self.keep_lane else None
+
+    def _lane_change_ahead(self) -> tuple[float, int, float] | None:
+        """Where the plan first reaches into another lane of the edge the vehicle is on
+        (before the next junction): the plan's station [m], that lane's index (from the
+        right) and the lanes' width [m]; ``None`` if it keeps its lane or is in a
+        junction (:func:`.lanes.lane_entry`)."""
+        c = self.corridor
+        width = self._lane_width()
+        if c is None or width is None:
+            return None
+        nxt = c.length
+        for a, b in self._junction_spans:
+            if b > self.station:
+                if a <= self.station:
+                    return None  # in a junction
+                nxt = a
+                break
+        ahead = self.path_s >= self.u
+        if not ahead.any():
+            return None
+        sl = np.asarray(c.to_sl(self.path_xy[ahead]))
+        beyond = sl[:, 0] > nxt  # the samples up to the next junction
+        sl = sl[:int(np.argmax(beyond))] if beyond.any() else sl
+        st = np.clip(sl[:, 0], 0.0, c.length)
+        right, _ = c.bounds_at(st)
+        turn = self.path_heading[ahead][:len(sl)] - c.heading_at(st)
+        ego = self.sc.ego
+        found = lane_entry(sl[:, 1], right, side_reach(turn, ego.length / 2.0, ego.width / 2.0),
+                           lane_width=width)
+        if found is None:
+            return None
+        k, lane = found
+        return float(self.path_s[ahead][k]), lane, width
 
     def _reroute(self, err: RoadBlockedError) -> tuple[bool, Any]:
         """Level 1 again with the blocked edge avoided. Returns (done, detail or error)."""
