@@ -393,10 +393,10 @@ class Control(Perception):
         there = np.floor((sl[:, 1] - right) / width) == lane
         if not there.any():
             return math.inf
-        t_e = self._time_along_plan(ahead)
+        t_e = self._time_along_plan(max(ahead, 0.0))
         ps, _, _, _, pv2 = self._pl
         v_e = min(math.sqrt(max(_interp(u_enter, ps, pv2), 0.0)),
-                  math.sqrt(self.v * self.v + 2.0 * tp.a_max * ahead))
+                  math.sqrt(self.v * self.v + 2.0 * tp.a_max * max(ahead, 0.0)))
         s_e = self.station + ahead
         for j, (s_o, _) in zip(near[there].tolist(), sl[there].tolist(), strict=True):
             v_o = max(float(o.speed[j]), 0.0)
