@@ -309,60 +309,82 @@ class Control(Perception):
         return cap
 
     def _body_speed(self, cap: float) -> float:
-        """Speed cap [m/s] that gives way to the bodies of long vehicles sweeping through
-        a junction (:mod:`.bodies`): where one, driving on along its lanes, comes within
-        the safety margin of the ego's footprint on its path ahead within
-        :data:`~.bodies.HORIZON`, and the ego would be there within :data:`YIELD_GAP` of
-        the time the body is, the ego stops before that place, if it still can at its
-        emergency braking (else it goes on, to clear it). Only caps below ``cap`` are
-        looked for."""
-        places = self.signals.long
-        if not places or self.traj is None or cap <= 0.0:
-            return math.inf
-        sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
+        """Speed cap [m/s] that keeps the ego's footprint, swinging round its path's
+        curves, off the bodies of others (:mod:`.bodies`): of long vehicles sweeping
+        through a junction (driving on along their lanes for :data:`~.bodies.HORIZON`)
+        by the safety margin, of standing vehicles by :data:`PATH_MARGIN`. Where a body
+        comes that near the ego's footprint on its path ahead, and the ego would be there
+        within :data:`YIELD_GAP` of the time the body is, the ego stops before that place,
+        if it still can at its emergency braking (else it goes on, to clear it). Only
+        caps below ``cap`` are looked for."""
         o = self.others
-        where = {vid: i for i, vid in enumerate(o.ids)}
+        if not o.n or self.traj is None or cap <= 0.0:
+            return math.inf
+        sc, ego = self.sc, self.sc.ego
         s = self.full_s
         lo = max(int(np.searchsorted(s, self.u, side="right")) - 1, 0)
         hi = int(np.searchsorted(s, self.u + max(self.v * HORIZON, 0.0) + ego.length + 10.0))
         if hi - lo < 1:
             return math.inf
-        path_s, path_xy, path_h = s[lo:hi], self.full_xy[lo:hi], self.full_heading[lo:hi]
+        path = (s[lo:hi], self.full_xy[lo:hi], self.full_heading[lo:hi])
+        size = (ego.length, ego.width)
         out = math.inf
-        for place in places:
+        where = {vid: i for i, vid in enumerate(o.ids)}
+        for place in self.signals.long:
             i = where.get(place.id)
             if i is None or place.speed < MOVING:
                 continue
             found = self._body_path(place)
             if found is None:
                 continue
-            path, index = found
-            at = path.station(index, place.pos)
+            lanes, index = found
+            at = lanes.station(index, place.pos)
             length, width = float(o.length[i]), float(o.width[i])
-            if index == 0 and at + place.speed * HORIZON < float(path.starts[1]):
+            if index == 0 and at + place.speed * HORIZON < float(lanes.starts[1]):
                 continue  # does not reach the junction within the horizon
-            times, centres, heads = bodies_along(path, at, place.speed, length)
-            met = meeting(times, centres, heads, (length, width), path_s, path_xy, path_h,
-                          (ego.length, ego.width), sc.roadmap.safety_margin)
-            if met is None:
-                continue
-            s_in, s_out, t_in_b, t_out_b = met
-            if t_out_b >= float(times[-1]) - 1e-9:
-                t_out_b = math.inf  # still there at the horizon
-            ahead = s_in - self.u
-            if ahead <= 0.0 or self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * ahead:
-                continue  # in its way already, or cannot stop before: clear it
-            room = ahead - YIELD_STOP
-            t_in = self._time_along_plan(s_in - self.u)
-            t_out = self._time_along_plan(s_out - self.u)
-            if t_in - YIELD_GAP >= t_out_b or t_in_b >= t_out + YIELD_GAP:
-                continue
-            c = math.sqrt(max(2.0 * tp.b_max * (room - self.v * self.dt), 0.0))
+            times, centres, heads = bodies_along(lanes, at, place.speed, length)
+            met = meeting(times, centres, heads, (length, width), *path, size,
+                          sc.roadmap.safety_margin)
+            c = self._give_way(met, float(times[-1]))
             if c < min(out, cap):
                 out = c
                 self.why_slow = (f"giving way to the body of vehicle '{place.id}' sweeping "
                                  "through the junction")
+        # standing vehicles near the path ahead, by size (few sizes)
+        xy = path[1]
+        x0, y0 = xy.min(axis=0) - ego.length
+        x1, y1 = xy.max(axis=0) + ego.length
+        standing = np.flatnonzero((o.speed < MOVING) & (o.cx + o.radius >= x0)
+                                  & (o.cx - o.radius <= x1) & (o.cy + o.radius >= y0)
+                                  & (o.cy - o.radius <= y1))
+        margin = min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
+        for dims in {(float(o.length[i]), float(o.width[i])) for i in standing.tolist()}:
+            group = standing[(o.length[standing] == dims[0]) & (o.width[standing] == dims[1])]
+            met = meeting(np.zeros(len(group)), o.centre[group], o.head[group], dims, *path,
+                          size, margin)
+            c = self._give_way(met, 0.0)
+            if c < min(out, cap):
+                out = c
+                self.why_slow = "keeping its body off a standing vehicle beside its path"
         return out
+
+    def _give_way(self, met: tuple[float, float, float, float] | None, last: float) -> float:
+        """Speed cap [m/s] for a body that meets the path (:func:`~.bodies.meeting`; its
+        last predicted time ``last`` [s]: a body still there then stays), or ``inf``."""
+        if met is None:
+            return math.inf
+        tp = self.sc.trajectory
+        s_in, s_out, t_in_b, t_out_b = met
+        if t_out_b >= last - 1e-9:
+            t_out_b = math.inf  # still there at the horizon
+        ahead = s_in - self.u
+        if ahead <= 0.0 or self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * ahead:
+            return math.inf  # in its way already, or cannot stop before: clear it
+        t_in = self._time_along_plan(ahead)
+        t_out = self._time_along_plan(s_out - self.u)
+        if t_in - YIELD_GAP >= t_out_b or t_in_b >= t_out + YIELD_GAP:
+            return math.inf
+        return math.sqrt(max(2.0 * tp.b_max * (ahead - YIELD_STOP - self.v * self.dt), 0.0))
 
     def _change_speed(self) -> float:
         """Speed cap [m/s] that waits for a gap before changing lanes: where the plan
