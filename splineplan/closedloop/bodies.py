@@ -24,7 +24,7 @@ from splineplan.spacetime import box_gap
 #: body keeps to its lane within a few centimetres).
 LONG_VEHICLE = 7.0
 #: Prediction horizon [s] and step [s].
-HORIZON = 4.0
+HORIZON = 6.0
 STEP = 0.25
 #: A long vehicle slower than this [m/s] is standing: its body stays where it is (the
 #: time-gap control sees it there).
