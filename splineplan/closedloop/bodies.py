@@ -26,6 +26,9 @@ LONG_VEHICLE = 7.0
 #: Prediction horizon [s] and step [s].
 HORIZON = 6.0
 STEP = 0.25
+#: A body whose path turns less than this [rad] keeps to its lanes within a few
+#: decimetres (a bus through a straight connection): the time-gap control sees it.
+BODY_TURN = 0.3
 #: A long vehicle slower than this [m/s] is standing: its body stays where it is (the
 #: time-gap control sees it there).
 MOVING = 0.5
@@ -42,6 +45,8 @@ class BodyPath:
     s: FloatArray
     starts: FloatArray
     scales: FloatArray
+    #: how far [rad] its heading turns from end to end (with every bend)
+    turn: float = 0.0
 
     def station(self, index: int, pos: float) -> float:
         """Station [m] of lane position ``pos`` [m] on lane ``index``."""
@@ -60,7 +65,10 @@ def body_path(lanes: list[tuple[FloatArray, float]]) -> BodyPath:
         at += geo
         parts.append(shape)
     xy = dedupe_polyline(np.concatenate(parts))
-    return BodyPath(xy, polyline_stations(xy), np.array(starts), np.array(scales))
+    d = np.diff(xy, axis=0)
+    heads = np.unwrap(np.arctan2(d[:, 1], d[:, 0])) if len(d) else np.zeros(1)
+    return BodyPath(xy, polyline_stations(xy), np.array(starts), np.array(scales),
+                    float(np.ptp(heads)))
 
 
 def points_at(path: BodyPath, stations: FloatArray) -> tuple[FloatArray, FloatArray]:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from splineplan.closedloop.bodies import (
+    BODY_TURN,
     HORIZON,
     MOVING,
     BodyPath,
@@ -38,6 +39,13 @@ YIELD_STOP = 1.0
 #: A vehicle in the path slower than this [m/s] stands in a queue: the ego keeps a junction
 #: clear rather than stand inside it behind that vehicle (``keep_clear``).
 QUEUE_SPEED = 1.0
+#: Where the bodies of others meet the path is found this often [s] (and after each new
+#: plan); in between, the ego gives way by what was found.
+BODY_EVERY = 0.3
+#: The footprint's swing off standing vehicles is checked where the path ahead turns by
+#: more than this [rad] (its corners then leave the band of the time-gap control by
+#: more than a decimetre).
+SWING_TURN = 0.1
 #: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
 STOPPED_FOE_SPEED = 0.1
 #: A lane change waits for a gap of this time [s] at the speed of the one behind (the
@@ -316,28 +324,48 @@ class Control(Perception):
         comes that near the ego's footprint on its path ahead, and the ego would be there
         within :data:`YIELD_GAP` of the time the body is, the ego stops before that place,
         if it still can at its emergency braking (else it goes on, to clear it). Only
-        caps below ``cap`` are looked for."""
-        o = self.others
-        if not o.n or self.traj is None or cap <= 0.0:
+        caps below ``cap`` are looked for. Where the bodies meet the path is found every
+        :data:`BODY_EVERY` and after each new plan."""
+        if self.traj is None or cap <= 0.0:
             return math.inf
+        key = (id(self.traj), len(self.replans))
+        if self._bodies_key != key or self.time >= self._bodies_at + BODY_EVERY - 1e-9:
+            self._bodies_key, self._bodies_at = key, self.time
+            self._bodies_met = self._bodies_meeting()
+        out = math.inf
+        for s_in, s_out, t_in_b, t_out_b, why in self._bodies_met:
+            c = self._give_way(s_in, s_out, t_in_b - self.time, t_out_b - self.time)
+            if c < min(out, cap):
+                out, self.why_slow = c, why
+        return out
+
+    def _bodies_meeting(self) -> list[tuple[float, float, float, float, str]]:
+        """Where (first and last station on the plan [m]) and when (first and last time
+        [s], absolute) bodies meet the ego's footprint on its path ahead, and what to say
+        of each (:meth:`_body_speed`)."""
+        o = self.others
+        if not o.n:
+            return []
         sc, ego = self.sc, self.sc.ego
         s = self.full_s
         lo = max(int(np.searchsorted(s, self.u, side="right")) - 1, 0)
         hi = int(np.searchsorted(s, self.u + max(self.v * HORIZON, 0.0) + ego.length + 10.0))
         if hi - lo < 1:
-            return math.inf
+            return []
         path = (s[lo:hi], self.full_xy[lo:hi], self.full_heading[lo:hi])
         size = (ego.length, ego.width)
-        out = math.inf
+        found = []
         where = {vid: i for i, vid in enumerate(o.ids)}
         for place in self.signals.long:
             i = where.get(place.id)
             if i is None or place.speed < MOVING:
                 continue
-            found = self._body_path(place)
-            if found is None:
+            known = self._body_path(place)
+            if known is None:
                 continue
-            lanes, index = found
+            lanes, index = known
+            if lanes.turn < BODY_TURN:
+                continue  # through a straight connection: it keeps to its lanes
             at = lanes.station(index, place.pos)
             length, width = float(o.length[i]), float(o.width[i])
             if index == 0 and at + place.speed * HORIZON < float(lanes.starts[1]):
@@ -345,12 +373,15 @@ class Control(Perception):
             times, centres, heads = bodies_along(lanes, at, place.speed, length)
             met = meeting(times, centres, heads, (length, width), *path, size,
                           sc.roadmap.safety_margin)
-            c = self._give_way(met, float(times[-1]))
-            if c < min(out, cap):
-                out = c
-                self.why_slow = (f"giving way to the body of vehicle '{place.id}' sweeping "
-                                 "through the junction")
-        # standing vehicles near the path ahead, by size (few sizes)
+            if met is not None:
+                t_out = met[3] if met[3] < float(times[-1]) - 1e-9 else math.inf
+                found.append((met[0], met[1], self.time + met[2], self.time + t_out,
+                              f"giving way to the body of vehicle '{place.id}' sweeping "
+                              "through the junction"))
+        # standing vehicles near the path ahead, by size (few sizes), where the path turns
+        # enough for the footprint to swing beyond what the time-gap control sees
+        if float(np.ptp(path[2])) < SWING_TURN:
+            return found
         xy = path[1]
         x0, y0 = xy.min(axis=0) - ego.length
         x1, y1 = xy.max(axis=0) + ego.length
@@ -362,21 +393,16 @@ class Control(Perception):
             group = standing[(o.length[standing] == dims[0]) & (o.width[standing] == dims[1])]
             met = meeting(np.zeros(len(group)), o.centre[group], o.head[group], dims, *path,
                           size, margin)
-            c = self._give_way(met, 0.0)
-            if c < min(out, cap):
-                out = c
-                self.why_slow = "keeping its body off a standing vehicle beside its path"
-        return out
+            if met is not None:
+                found.append((met[0], met[1], -math.inf, math.inf,
+                              "keeping its body off a standing vehicle beside its path"))
+        return found
 
-    def _give_way(self, met: tuple[float, float, float, float] | None, last: float) -> float:
-        """Speed cap [m/s] for a body that meets the path (:func:`~.bodies.meeting`; its
-        last predicted time ``last`` [s]: a body still there then stays), or ``inf``."""
-        if met is None:
-            return math.inf
+    def _give_way(self, s_in: float, s_out: float, t_in_b: float, t_out_b: float) -> float:
+        """Speed cap [m/s] for a body that meets the path from station ``s_in`` to
+        ``s_out`` [m] of the plan, from ``t_in_b`` to ``t_out_b`` [s] from now, or
+        ``inf``."""
         tp = self.sc.trajectory
-        s_in, s_out, t_in_b, t_out_b = met
-        if t_out_b >= last - 1e-9:
-            t_out_b = math.inf  # still there at the horizon
         ahead = s_in - self.u
         if ahead <= 0.0 or self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * ahead:
             return math.inf  # in its way already, or cannot stop before: clear it
