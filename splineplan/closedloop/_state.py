@@ -88,9 +88,6 @@ class DriverState:
     signals: Signals
     _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
     _body_paths: dict[tuple[str, str], Any]  # (lane, via) -> (bodies.BodyPath, lane) | None
-    _bodies_key: tuple[int, int]
-    _bodies_at: float
-    _bodies_met: list[tuple[float, float, float, float, str]]
     _pl: tuple[list[float], ...]
     _pl_np: tuple[FloatArray, FloatArray]
     _times_key: tuple[float, float] | None

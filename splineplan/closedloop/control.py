@@ -39,13 +39,6 @@ YIELD_STOP = 1.0
 #: A vehicle in the path slower than this [m/s] stands in a queue: the ego keeps a junction
 #: clear rather than stand inside it behind that vehicle (``keep_clear``).
 QUEUE_SPEED = 1.0
-#: Where the bodies of others meet the path is found this often [s] (and after each new
-#: plan); in between, the ego gives way by what was found.
-BODY_EVERY = 0.3
-#: The footprint's swing off standing vehicles is checked where the path ahead turns by
-#: more than this [rad] (its corners then leave the band of the time-gap control by
-#: more than a decimetre).
-SWING_TURN = 0.1
 #: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
 STOPPED_FOE_SPEED = 0.1
 #: A lane change waits for a gap of this time [s] at the speed of the one behind (the
@@ -324,16 +317,11 @@ class Control(Perception):
         comes that near the ego's footprint on its path ahead, and the ego would be there
         within :data:`YIELD_GAP` of the time the body is, the ego stops before that place,
         if it still can at its emergency braking (else it goes on, to clear it). Only
-        caps below ``cap`` are looked for. Where the bodies meet the path is found every
-        :data:`BODY_EVERY` and after each new plan."""
+        caps below ``cap`` are looked for."""
         if self.traj is None or cap <= 0.0:
             return math.inf
-        key = (id(self.traj), len(self.replans))
-        if self._bodies_key != key or self.time >= self._bodies_at + BODY_EVERY - 1e-9:
-            self._bodies_key, self._bodies_at = key, self.time
-            self._bodies_met = self._bodies_meeting()
         out = math.inf
-        for s_in, s_out, t_in_b, t_out_b, why in self._bodies_met:
+        for s_in, s_out, t_in_b, t_out_b, why in self._bodies_meeting():
             c = self._give_way(s_in, s_out, t_in_b - self.time, t_out_b - self.time)
             if c < min(out, cap):
                 out, self.why_slow = c, why
@@ -378,10 +366,7 @@ class Control(Perception):
                 found.append((met[0], met[1], self.time + met[2], self.time + t_out,
                               f"giving way to the body of vehicle '{place.id}' sweeping "
                               "through the junction"))
-        # standing vehicles near the path ahead, by size (few sizes), where the path turns
-        # enough for the footprint to swing beyond what the time-gap control sees
-        if float(np.ptp(path[2])) < SWING_TURN:
-            return found
+        # standing vehicles near the path ahead, by size (few sizes)
         xy = path[1]
         x0, y0 = xy.min(axis=0) - ego.length
         x1, y1 = xy.max(axis=0) + ego.length

@@ -97,9 +97,6 @@ class Driver(Replanning, Control):
         self.plan_seconds = 0.0  # wall time [s] of the planning calls
         self._obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]] = {}
         self._body_paths: dict[tuple[str, str], tuple[BodyPath, int] | None] = {}
-        self._bodies_key = (0, -1)  # the plan and time the bodies' meetings were found
-        self._bodies_at = -math.inf
-        self._bodies_met: list[tuple[float, float, float, float, str]] = []
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.station = 0.0
         self.deviation = 0.0
