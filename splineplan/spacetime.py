@@ -263,10 +263,15 @@ def occupancy(s: ArrayLike, xy: ArrayLike, heading: ArrayLike, times: ArrayLike,
     return Occupancy(tt, lo, hi)
 
 
-def box_gap(c1: FloatArray, h1: FloatArray, size1: tuple[float, float], c2: FloatArray,
-            h2: FloatArray, size2: tuple[float, float]) -> FloatArray:
+#: (length, width) [m] of rectangles: one for all, or one each.
+BoxSize = tuple[float, float] | tuple[FloatArray, FloatArray]
+
+
+def box_gap(c1: FloatArray, h1: FloatArray, size1: BoxSize, c2: FloatArray,
+            h2: FloatArray, size2: BoxSize) -> FloatArray:
     """Distance [m] between oriented rectangles, 0 where they overlap: centres ``(N, 2)``
-    [m], headings ``(N,)`` [rad] and (length, width) [m] of each side.
+    [m], headings ``(N,)`` [rad] and (length, width) [m] of each side (one for all, or
+    ``(N,)`` each).
 
     Two disjoint convex polygons are closest at a corner of one of them, so the distance
     is the smallest of the eight corner-to-rectangle distances (each in the rectangle's own
@@ -291,8 +296,8 @@ def box_gap(c1: FloatArray, h1: FloatArray, size1: tuple[float, float], c2: Floa
 
 
 def _corner_gap(dx: FloatArray, dy: FloatArray, cf: FloatArray, sf: FloatArray,
-                ct: FloatArray, st: FloatArray, lt: float, wt: float, lf: float, wf: float
-                ) -> FloatArray:
+                ct: FloatArray, st: FloatArray, lt: float | FloatArray, wt: float | FloatArray,
+                lf: float | FloatArray, wf: float | FloatArray) -> FloatArray:
     """Smallest distance ``(N,)`` from the corners of the rectangles with heading
     (``cf``, ``sf``) and half sizes ``lf``, ``wf``, centred at (``dx``, ``dy``) from the
     others, to those others (heading ``ct``, ``st``, half sizes ``lt``, ``wt``)."""

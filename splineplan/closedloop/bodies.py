@@ -16,6 +16,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations
 from splineplan.spacetime import box_gap
@@ -26,9 +27,6 @@ LONG_VEHICLE = 7.0
 #: Prediction horizon [s] and step [s].
 HORIZON = 6.0
 STEP = 0.25
-#: A body whose path turns less than this [rad] keeps to its lanes within a few
-#: decimetres (a bus through a straight connection): the time-gap control sees it.
-BODY_TURN = 0.3
 #: A long vehicle slower than this [m/s] is standing: its body stays where it is (the
 #: time-gap control sees it there).
 MOVING = 0.5
@@ -45,8 +43,6 @@ class BodyPath:
     s: FloatArray
     starts: FloatArray
     scales: FloatArray
-    #: how far [rad] its heading turns from end to end (with every bend)
-    turn: float = 0.0
 
     def station(self, index: int, pos: float) -> float:
         """Station [m] of lane position ``pos`` [m] on lane ``index``."""
@@ -65,10 +61,7 @@ def body_path(lanes: list[tuple[FloatArray, float]]) -> BodyPath:
         at += geo
         parts.append(shape)
     xy = dedupe_polyline(np.concatenate(parts))
-    d = np.diff(xy, axis=0)
-    heads = np.unwrap(np.arctan2(d[:, 1], d[:, 0])) if len(d) else np.zeros(1)
-    return BodyPath(xy, polyline_stations(xy), np.array(starts), np.array(scales),
-                    float(np.ptp(heads)))
+    return BodyPath(xy, polyline_stations(xy), np.array(starts), np.array(scales))
 
 
 def points_at(path: BodyPath, stations: FloatArray) -> tuple[FloatArray, FloatArray]:
@@ -108,21 +101,50 @@ def meeting(times: FloatArray, centres: FloatArray, heads: FloatArray,
     of the ego's footprint (``ego``: length, width [m]) on its path (centre stations
     ``path_s``, points ``path_xy``, headings ``path_h``): the first and last station [m]
     of the path so met, and the first and last time [s] of the body that meets it;
-    ``None`` if it never does."""
+    ``None`` if it never does (:func:`meetings` of one body)."""
+    k = len(times)
+    met = meetings(np.zeros(k, dtype=np.int64), 1, np.asarray(times, dtype=float),
+                   np.asarray(centres, dtype=float), np.asarray(heads, dtype=float),
+                   np.full(k, size[0]), np.full(k, size[1]), np.full(k, margin),
+                   path_s, path_xy, path_h, ego)
+    if np.isnan(met[0, 0]):
+        return None
+    return (float(met[0, 0]), float(met[0, 1]), float(met[0, 2]), float(met[0, 3]))
+
+
+def meetings(body: NDArray[np.int64], n_bodies: int, times: FloatArray, centres: FloatArray,
+             heads: FloatArray, lengths: FloatArray, widths: FloatArray, margins: FloatArray,
+             path_s: FloatArray, path_xy: FloatArray, path_h: FloatArray,
+             ego: tuple[float, float]) -> FloatArray:
+    """:func:`meeting` of several bodies at once: rows of predicted rectangles (``body``
+    index, time [s], centre, heading, length, width [m], and the margin [m] of each),
+    ``(n_bodies, 4)`` first and last path station [m] met and first and last time [s]
+    meeting for each body, NaN for a body that never meets the path."""
+    out = np.full((n_bodies, 4), np.nan)
     k, n = len(times), len(path_s)
     if not k or not n:
-        return None
-    reach = 0.5 * (math.hypot(*size) + math.hypot(*ego)) + margin
+        return out
+    reach = 0.5 * (np.hypot(lengths, widths) + math.hypot(*ego)) + margins
     # only path samples within reach of some body
     d2 = ((path_xy[None, :, :] - centres[:, None, :]) ** 2).sum(axis=2)  # (k, n)
-    near = d2 <= reach * reach
+    near = d2 <= (reach * reach)[:, None]
     if not near.any():
-        return None
+        return out
     ki, ni = np.nonzero(near)
-    gap = box_gap(centres[ki], heads[ki], size, path_xy[ni], path_h[ni], ego)
-    hit = gap <= margin
+    gap = box_gap(centres[ki], heads[ki], (lengths[ki], widths[ki]), path_xy[ni],
+                  path_h[ni], ego)
+    hit = gap <= margins[ki]
     if not hit.any():
-        return None
+        return out
     ki, ni = ki[hit], ni[hit]
-    return (float(path_s[ni].min()), float(path_s[ni].max()), float(times[ki].min()),
-            float(times[ki].max()))
+    b, st, tt = body[ki], path_s[ni], times[ki]
+    out[:, 0] = np.inf
+    out[:, 1] = -np.inf
+    out[:, 2] = np.inf
+    out[:, 3] = -np.inf
+    np.minimum.at(out[:, 0], b, st)
+    np.maximum.at(out[:, 1], b, st)
+    np.minimum.at(out[:, 2], b, tt)
+    np.maximum.at(out[:, 3], b, tt)
+    out[~np.isin(np.arange(n_bodies), b)] = np.nan
+    return out

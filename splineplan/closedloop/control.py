@@ -13,17 +13,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from splineplan.closedloop.bodies import (
-    BODY_TURN,
     HORIZON,
     MOVING,
     BodyPath,
     bodies_along,
     body_path,
-    meeting,
+    meetings,
 )
 from splineplan.closedloop.cooperate import CROSSING
 from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.errors import SplineplanError
+from splineplan.geometry import FloatArray
 from splineplan.sumo.world import LanePlace, Signals
 from splineplan.traffic import first_in_reach, probe_points, safe_speed
 
@@ -322,15 +322,16 @@ class Control(Perception):
             return math.inf
         out = math.inf
         for s_in, s_out, t_in_b, t_out_b, why in self._bodies_meeting():
-            c = self._give_way(s_in, s_out, t_in_b - self.time, t_out_b - self.time)
+            c = self._give_way(s_in, s_out, t_in_b, t_out_b)
             if c < min(out, cap):
                 out, self.why_slow = c, why
         return out
 
     def _bodies_meeting(self) -> list[tuple[float, float, float, float, str]]:
         """Where (first and last station on the plan [m]) and when (first and last time
-        [s], absolute) bodies meet the ego's footprint on its path ahead, and what to say
-        of each (:meth:`_body_speed`)."""
+        [s] from now) bodies meet the ego's footprint on its path ahead, and what to say
+        of each (:meth:`_body_speed`): each moving long vehicle's, and the standing
+        vehicles' of each size together; all in one pass (:func:`~.bodies.meetings`)."""
         o = self.others
         if not o.n:
             return []
@@ -341,8 +342,9 @@ class Control(Perception):
         if hi - lo < 1:
             return []
         path = (s[lo:hi], self.full_xy[lo:hi], self.full_heading[lo:hi])
-        size = (ego.length, ego.width)
-        found = []
+        rows: list[tuple[FloatArray, FloatArray, FloatArray, float, float, float]] = []
+        whys: list[str] = []
+        last: list[float] = []  # a body still meeting at this time stays
         where = {vid: i for i, vid in enumerate(o.ids)}
         for place in self.signals.long:
             i = where.get(place.id)
@@ -352,20 +354,15 @@ class Control(Perception):
             if known is None:
                 continue
             lanes, index = known
-            if lanes.turn < BODY_TURN:
-                continue  # through a straight connection: it keeps to its lanes
             at = lanes.station(index, place.pos)
             length, width = float(o.length[i]), float(o.width[i])
             if index == 0 and at + place.speed * HORIZON < float(lanes.starts[1]):
                 continue  # does not reach the junction within the horizon
             times, centres, heads = bodies_along(lanes, at, place.speed, length)
-            met = meeting(times, centres, heads, (length, width), *path, size,
-                          sc.roadmap.safety_margin)
-            if met is not None:
-                t_out = met[3] if met[3] < float(times[-1]) - 1e-9 else math.inf
-                found.append((met[0], met[1], self.time + met[2], self.time + t_out,
-                              f"giving way to the body of vehicle '{place.id}' sweeping "
-                              "through the junction"))
+            rows.append((times, centres, heads, length, width, sc.roadmap.safety_margin))
+            whys.append(f"giving way to the body of vehicle '{place.id}' sweeping through "
+                        "the junction")
+            last.append(float(times[-1]))
         # standing vehicles near the path ahead, by size (few sizes)
         xy = path[1]
         x0, y0 = xy.min(axis=0) - ego.length
@@ -376,11 +373,27 @@ class Control(Perception):
         margin = min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
         for dims in {(float(o.length[i]), float(o.width[i])) for i in standing.tolist()}:
             group = standing[(o.length[standing] == dims[0]) & (o.width[standing] == dims[1])]
-            met = meeting(np.zeros(len(group)), o.centre[group], o.head[group], dims, *path,
-                          size, margin)
-            if met is not None:
-                found.append((met[0], met[1], -math.inf, math.inf,
-                              "keeping its body off a standing vehicle beside its path"))
+            rows.append((np.zeros(len(group)), o.centre[group], o.head[group], dims[0],
+                         dims[1], margin))
+            whys.append("keeping its body off a standing vehicle beside its path")
+            last.append(0.0)
+        if not rows:
+            return []
+        counts = [len(r[0]) for r in rows]
+        met = meetings(np.repeat(np.arange(len(rows)), counts), len(rows),
+                       np.concatenate([r[0] for r in rows]),
+                       np.concatenate([r[1] for r in rows]),
+                       np.concatenate([r[2] for r in rows]),
+                       np.repeat([r[3] for r in rows], counts),
+                       np.repeat([r[4] for r in rows], counts),
+                       np.repeat([r[5] for r in rows], counts), *path, (ego.length, ego.width))
+        found = []
+        for (s_in, s_out, t_in, t_out), why, end in zip(met.tolist(), whys, last, strict=True):
+            if math.isnan(s_in):
+                continue
+            if t_out >= end - 1e-9:
+                t_out = math.inf  # still there at the horizon
+            found.append((s_in, s_out, t_in, t_out, why))
         return found
 
     def _give_way(self, s_in: float, s_out: float, t_in_b: float, t_out_b: float) -> float:
