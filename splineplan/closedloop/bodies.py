@@ -2,12 +2,12 @@
 
 SUMO moves a vehicle along its lanes' centre lines: its body is the rectangle from its back,
 its length behind the front along its lanes, to its front. Through a junction turn a bus's
-body cuts across the inside of the curve (a 12 m bus on a turn of 10 m radius lies 2 m
+body cuts across the inside of the curve (a 12 m bus on a turn of 10 m radius lies 1.75 m
 inside its lane's centre line at its middle), over lanes whose drivers SUMO lets go on
 (their connections are no foes). A planned vehicle sees the bus and gives way: it predicts
 the body at constant speed along the bus's lanes for a few seconds (:func:`body_path`,
 :func:`bodies_along`) and finds where and when that body meets its own path
-(:func:`meeting`).
+(:func:`meeting`, :func:`meetings` for several bodies at once).
 """
 
 from __future__ import annotations
