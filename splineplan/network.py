@@ -231,6 +231,11 @@ class RoadNetwork:
         """Lanes of a normal edge, rightmost first."""
         return self.lanes[self.edge_index(edge_id)]
 
+    def allowed_lanes(self, edge_id: str, vclass: str) -> tuple[Lane, ...]:
+        """The lanes of a normal edge that ``vclass`` may use, rightmost first (a route's
+        corridor counts its lanes among these)."""
+        return tuple(ln for ln in self.lanes_of(edge_id) if ln.allows(vclass))
+
     def length_of(self, edge_id: str) -> float:
         """Length [m] of a normal edge."""
         return float(self.lengths[self.edge_index(edge_id)])
@@ -294,8 +299,8 @@ class RoadNetwork:
         conns = self.connections_between(from_edge, to_edge, vclass=vclass)
         if not conns:
             return None
-        src = [ln.index for ln in self.lanes_of(from_edge) if ln.allows(vclass)]
-        dst = [ln.index for ln in self.lanes_of(to_edge) if ln.allows(vclass)]
+        src = [ln.index for ln in self.allowed_lanes(from_edge, vclass)]
+        dst = [ln.index for ln in self.allowed_lanes(to_edge, vclass)]
         if not src or not dst:
             return None
         mine = [c for c in conns if via is not None and via in c.via]
@@ -547,7 +552,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     keep_edge: list[int] = []  # the route edge of each
     starts: list[int] = []  # index into pieces where each edge's own stretch begins
     for i, eid in enumerate(edges):
-        lanes = [ln for ln in network.lanes_of(eid) if ln.allows(cls)]
+        lanes = list(network.allowed_lanes(eid, cls))
         if not lanes:
             raise GeometryError(f"vehicle class '{cls}' may use no lane of edge '{eid}'")
         starts.append(len(pieces))
@@ -564,7 +569,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         if i + 1 < len(edges):
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
-            dst = [ln for ln in network.lanes_of(edges[i + 1]) if ln.allows(cls)]
+            dst = list(network.allowed_lanes(edges[i + 1], cls))
             fillet = _cached_junction_band(network, lanes, dst) if dst else None
             if fillet is not None:
                 pieces.append(fillet)
@@ -1640,7 +1645,7 @@ BEND_STEP = 1.0
 
 
 def _bend_fits(network: RoadNetwork, edge_id: str, vclass: str, car: CarShape) -> bool:
-    lanes = [ln for ln in network.lanes_of(edge_id) if ln.allows(vclass)]
+    lanes = list(network.allowed_lanes(edge_id, vclass))
     ref, st, runs = sharp_runs(lanes, car)
     for first, last, turn in runs:
         if not _run_fits(ref, st, lanes, float(st[first]), float(st[last]), turn, car):

@@ -9,6 +9,7 @@ import json
 import subprocess
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 import libsumo
 import numpy as np
@@ -36,6 +37,15 @@ def _two(tmp_path: Path, a: str, b: str, *, duration: float = 60.0) -> Path:
     p.write_text(f'network = "{NETS / "grid.net.xml"}"\n[[ego]]\nid = "a"\n{a}\n'
                  f'[[ego]]\nid = "b"\n{b}\n[sim]\nduration = {duration}\nseed = 1\n')
     return p
+
+
+def _p_among_sumo(tmp_path: Path, net: str, routes: str, duration: float) -> tuple[Any, Any]:
+    """SUMO's run of the route file ``routes`` (its text) on ``net`` (of ``sumo_nets/``)
+    with vehicle ``p`` planned: the scenario and the run's result."""
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text(routes)
+    sc = sumo_scenario(net=NETS / net, routes=(rou,), duration=duration)
+    return sc, simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
 
 
 def test_two_planned_vehicles_side_by_side(tmp_path: Path) -> None:
@@ -278,20 +288,18 @@ def test_planned_vehicle_keeps_to_its_lane_among_sumo_traffic(tmp_path: Path) ->
     one lane (SUMO has it on one lane only, and the drivers of the other lane do not see
     a part of it that reaches into theirs), so that SUMO's cars passing it in the other
     lane never touch it."""
-    rou = tmp_path / "r.rou.xml"
     cars = "\n".join(
         f'<vehicle id="c{k}" depart="{2.0 * k:g}" departLane="1" departPos="5" '
         f'departSpeed="max" type="car"><route edges="A1B1 B1C1 C1D1"/></vehicle>'
         for k in range(1, 6))
-    rou.write_text(f"""<routes>
+    routes = f"""<routes>
 <vType id="car" length="4.5" width="1.8" vClass="passenger" lcStrategic="-1"
        lcSpeedGain="0" lcKeepRight="0"/>
 <vehicle id="p" depart="0" departLane="0" departPos="20" type="car">
   <route edges="A1B1 B1C1 C1D1"/></vehicle>
 {cars}
-</routes>""")
-    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=45.0)
-    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+</routes>"""
+    sc, r = _p_among_sumo(tmp_path, "grid.net.xml", routes, 45.0)
     d = r.vehicles["p"].driven
     # the corridor of a street spans both lanes, its reference the line between them:
     # within a lane, the centre keeps half the car's width from that line
@@ -311,16 +319,14 @@ def test_planned_vehicle_turns_into_the_lane_its_connection_leads_to(tmp_path: P
     left turn on the street's left lane and the right turn on its right one. The planned
     car comes out on the left lane and stays there (it would otherwise cut across the
     right turn), and the two never touch."""
-    rou = tmp_path / "r.rou.xml"
-    rou.write_text("""<routes>
+    routes = """<routes>
 <vType id="car" length="4.5" width="1.8" vClass="passenger"/>
 <vehicle id="p" depart="0" departPos="80" departSpeed="max" type="car">
   <route edges="A2A1 A1B1"/></vehicle>
 <vehicle id="q" depart="0" departPos="90" departSpeed="max" type="car">
   <route edges="A0A1 A1B1"/></vehicle>
-</routes>""")
-    sc = sumo_scenario(net=NETS / "city.net.xml", routes=(rou,), duration=40.0)
-    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+</routes>"""
+    _, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 40.0)
     d = r.vehicles["p"].driven
     after = [str(lane) for lane in d["lane"] if str(lane).startswith("A1B1")]
     assert len(after) > 20
@@ -338,17 +344,15 @@ def test_planned_vehicle_gives_way_to_a_bus_body_sweeping_through_a_turn(
     turns right from the north: SUMO's connections are no foes, but the bus's body cuts
     across the inside of its turn, over the car's way. The planned car waits until the
     body has passed, and keeps the safety margin from it (without this it was hit)."""
-    rou = tmp_path / "r.rou.xml"
-    rou.write_text(f"""<routes>
+    routes = f"""<routes>
 <vType id="car" length="4.5" width="1.8" vClass="passenger"/>
 <vType id="bus" length="12" width="2.5" vClass="bus"/>
 <vehicle id="b" depart="0" departPos="60" departSpeed="8" type="bus">
   <route edges="D0E0 E0E1"/></vehicle>
 <vehicle id="p" depart="0" departPos="{car_pos}" departSpeed="max" type="car">
   <route edges="E1E0 E0D0"/></vehicle>
-</routes>""")
-    sc = sumo_scenario(net=NETS / "city.net.xml", routes=(rou,), duration=25.0)
-    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+</routes>"""
+    sc, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 25.0)
     pairs = r.metrics["pairs"]
     assert pairs["collision_pairs_planned"] == []
     assert pairs["min_gap_planned"]["value"] >= 0.5 * sc.roadmap.safety_margin
@@ -362,18 +366,15 @@ def test_planned_vehicle_changes_lanes_only_into_a_gap(tmp_path: Path) -> None:
     footprint reaches over the line between the lanes, it keeps a quarter of a metre
     from every car in the right lane (shapely footprints from SUMO's FCD; without the
     wait it let a car pass 0.1 m from its side)."""
-    rou = tmp_path / "r.rou.xml"
     cars = [(2.0 * k, f'<vehicle id="c{k}" depart="{2.0 * k:g}" departLane="0" departPos="5" '
              'departSpeed="max" type="car"><route edges="A1B1 B1C1 C1D1"/></vehicle>')
             for k in range(8)]
     cars.append((4.0, '<vehicle id="p" depart="4" departLane="1" departPos="20" '
                       'departSpeed="max" type="car"><route edges="A1B1 B1C1 C1C0"/></vehicle>'))
-    rou.write_text('<routes>\n<vType id="car" length="4.5" width="1.8" vClass="passenger" '
-                   'lcStrategic="-1" lcSpeedGain="0" lcKeepRight="0"/>\n'
-                   + "\n".join(v for _, v in sorted(cars, key=lambda c: c[0]))
-                   + "\n</routes>")
-    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=60.0)
-    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+    routes = ('<routes>\n<vType id="car" length="4.5" width="1.8" vClass="passenger" '
+              'lcStrategic="-1" lcSpeedGain="0" lcKeepRight="0"/>\n'
+              + "\n".join(v for _, v in sorted(cars, key=lambda c: c[0])) + "\n</routes>")
+    _, r = _p_among_sumo(tmp_path, "grid.net.xml", routes, 60.0)
     assert r.metrics["pairs"]["collision_pairs_planned"] == []
     assert r.vehicles["p"].status == "arrived"
     net = sumolib.net.readNet(str(NETS / "grid.net.xml"))
@@ -404,17 +405,15 @@ def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
     before the junction, as SUMO's drivers do, rather than in it, where it would stand in
     the way of the crossing traffic; it never enters the junction while there is no room
     behind that car."""
-    rou = tmp_path / "r.rou.xml"
-    rou.write_text("""<routes>
+    routes = """<routes>
 <vType id="car" length="4.5" width="1.8" vClass="passenger"/>
 <vType id="crawl" length="4.5" width="1.8" vClass="passenger" maxSpeed="0.05"/>
 <vehicle id="q" depart="0" departLane="0" departPos="7" departSpeed="0" type="crawl">
   <route edges="B1C1 C1D1"/></vehicle>
 <vehicle id="p" depart="0" departLane="0" departPos="60" type="car">
   <route edges="A1B1 B1C1 C1D1"/></vehicle>
-</routes>""")
-    sc = sumo_scenario(net=NETS / "grid.net.xml", routes=(rou,), duration=25.0)
-    r = simulate(sc, out_dir=tmp_path / "out", vehicles=("p",), seed=1, progress=False)
+</routes>"""
+    _, r = _p_among_sumo(tmp_path, "grid.net.xml", routes, 25.0)
     d = r.vehicles["p"].driven
     lanes = [str(lane) for lane in d["lane"]]
     assert not any(lane.startswith(":B1") for lane in lanes)

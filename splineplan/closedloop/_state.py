@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from splineplan.closedloop.lanes import LaneChange
 from splineplan.corridor import Corridor
 from splineplan.geometry import FloatArray
 from splineplan.network import CarShape
@@ -74,7 +75,7 @@ class DriverState:
     publish: bool
     keep_plans: bool
     keep_lane: bool
-    lane_change: tuple[float, int, float] | None  # plan station, lane, lane width [m]
+    lane_change: LaneChange | None
     keep_clear: bool
     published_plan: Any  # spacetime.MovingObstacle | None: this vehicle's latest plan
     own_plan: Any  # the same, kept after the run took it to the board

@@ -400,15 +400,24 @@ class Control(Perception):
         """Speed cap [m/s] for a body that meets the path from station ``s_in`` to
         ``s_out`` [m] of the plan, from ``t_in_b`` to ``t_out_b`` [s] from now, or
         ``inf``."""
-        tp = self.sc.trajectory
         ahead = s_in - self.u
-        if ahead <= 0.0 or self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * ahead:
-            return math.inf  # in its way already, or cannot stop before: clear it
+        if ahead <= 0.0:
+            return math.inf  # in its way already: clear it
         t_in = self._time_along_plan(ahead)
         t_out = self._time_along_plan(s_out - self.u)
         if t_in - YIELD_GAP >= t_out_b or t_in_b >= t_out + YIELD_GAP:
             return math.inf
-        return math.sqrt(max(2.0 * tp.b_max * (ahead - YIELD_STOP - self.v * self.dt), 0.0))
+        return self._stop_short(ahead)
+
+    def _stop_short(self, ahead: float) -> float:
+        """Speed cap [m/s] that stops :data:`YIELD_STOP` short of a place ``ahead`` [m]
+        along the plan (comfortably, one step early; at once where it is that near
+        already), or ``inf`` where the ego cannot stop before it even at its emergency
+        braking: it goes on, to clear it."""
+        b = self.sc.trajectory.b_max
+        if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * max(ahead, 0.0):
+            return math.inf
+        return math.sqrt(max(2.0 * b * (ahead - YIELD_STOP - self.v * self.dt), 0.0))
 
     def _change_speed(self) -> float:
         """Speed cap [m/s] that waits for a gap before changing lanes: where the plan
@@ -421,13 +430,11 @@ class Control(Perception):
         o = self.others
         if ch is None or self.traj is None or not o.n or self.corridor is None:
             return math.inf
-        u_enter, lane, width = ch
         tp, ego = self.sc.trajectory, self.sc.ego
-        ahead = u_enter - self.u
-        if self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * max(ahead, 0.0):
-            return math.inf  # cannot stop before
-        if ahead <= 0.0 and self.last_lane.endswith(f"_{lane}"):
-            return math.inf  # SUMO has it in that lane: changing already
+        ahead = ch.at - self.u
+        stop = self._stop_short(ahead)
+        if math.isinf(stop) or (ahead <= 0.0 and self.last_lane == ch.lane_id):
+            return math.inf  # cannot stop before, or SUMO has it in that lane already
         x, y = float(self.pose[0]), float(self.pose[1])
         near = np.flatnonzero((~o.stopped) & (np.hypot(o.cx - x, o.cy - y) < CHANGE_LOOK))
         if not len(near):
@@ -436,12 +443,12 @@ class Control(Perception):
         sl = np.atleast_2d(self._project(np.column_stack((o.cx[near], o.cy[near])),
                                          back=CHANGE_LOOK + 10.0, ahead=CHANGE_LOOK + 10.0))
         right, _ = c.bounds_at(np.clip(sl[:, 0], 0.0, c.length))
-        there = np.floor((sl[:, 1] - right) / width) == lane
+        there = np.floor((sl[:, 1] - right) / ch.width) == ch.lane
         if not there.any():
             return math.inf
         t_e = self._time_along_plan(max(ahead, 0.0))
         ps, _, _, _, pv2 = self._pl
-        v_e = min(math.sqrt(max(_interp(u_enter, ps, pv2), 0.0)),
+        v_e = min(math.sqrt(max(_interp(ch.at, ps, pv2), 0.0)),
                   math.sqrt(self.v * self.v + 2.0 * tp.a_max * max(ahead, 0.0)))
         s_e = self.station + ahead
         for j, (s_o, _) in zip(near[there].tolist(), sl[there].tolist(), strict=True):
@@ -456,9 +463,7 @@ class Control(Perception):
             if short:
                 self.why_slow = (f"waiting for a gap to change lanes (vehicle '{o.ids[j]}' "
                                  "in the lane)")
-                # stop before the place; one that reaches over the line already stands
-                return math.sqrt(max(2.0 * tp.b_max * (ahead - YIELD_STOP - self.v * self.dt),
-                                     0.0))
+                return stop  # one that reaches over the line already stands
         return math.inf
 
     def _body_path(self, place: LanePlace) -> tuple[BodyPath, int] | None:

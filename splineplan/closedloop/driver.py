@@ -21,6 +21,7 @@ import numpy as np
 
 from splineplan.closedloop.bodies import BodyPath
 from splineplan.closedloop.control import Control
+from splineplan.closedloop.lanes import LaneChange
 from splineplan.closedloop.replan import Replan, Replanning
 from splineplan.corridor import Corridor
 from splineplan.errors import ScenarioError, VehicleClassError
@@ -109,7 +110,7 @@ class Driver(Replanning, Control):
         self.publish = False  # whether it publishes its plans (several planned vehicles)
         self.keep_plans = True  # keep every plan for pictures (a single ego's run)
         self.keep_lane = False  # plan within its lane first (among SUMO's traffic)
-        self.lane_change: tuple[float, int, float] | None = None  # see Replanning._take
+        self.lane_change: LaneChange | None = None  # see Replanning._take
         self.keep_clear = False  # stop before a junction it could not leave
         self.published_plan: Any = None
         self.own_plan: Any = None  # its latest published plan (kept)

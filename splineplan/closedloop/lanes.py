@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -159,6 +159,18 @@ def onto_road(window: Corridor, xy: tuple[float, float]) -> tuple[float, float] 
         return None
     x, y = (float(v) for v in window.to_xy(np.array([s]), np.array([new]))[0])
     return x, y
+
+
+@dataclass(frozen=True)
+class LaneChange:
+    """Where a plan first reaches into the next lane: the plan's station ``at`` [m], that
+    lane's index ``lane`` counted from the right among the lanes the vehicle may use, the
+    lanes' ``width`` [m], and the lane's SUMO id."""
+
+    at: float
+    lane: int
+    width: float
+    lane_id: str
 
 
 #: Slack [m] by which a footprint may reach over a lane line before it counts as in the

@@ -14,7 +14,13 @@ from typing import Any
 import numpy as np
 
 from splineplan.closedloop.cooperate import WAIT_REPLAN, keeps_clear_of, plans_before
-from splineplan.closedloop.lanes import lane_band, lane_entry, onto_road, side_reach
+from splineplan.closedloop.lanes import (
+    LaneChange,
+    lane_band,
+    lane_entry,
+    onto_road,
+    side_reach,
+)
 from splineplan.closedloop.perception import Perception
 from splineplan.corridor import Corridor
 from splineplan.errors import (
@@ -25,6 +31,7 @@ from splineplan.errors import (
     TrajectoryError,
 )
 from splineplan.geometry import FloatArray
+from splineplan.network import Lane
 from splineplan.obstacles import Obstacles
 from splineplan.spacetime import MovingObstacle, published
 from splineplan.traffic import probe_points
@@ -369,14 +376,18 @@ class Replanning(Perception):
                     arrive = None
         return {"leads_to": leads_to, "arrive": arrive}
 
+    def _edge_lanes(self) -> tuple[Lane, ...]:
+        """The lanes the vehicle may use of the route's edge where it is (none known:
+        empty)."""
+        try:
+            return self.net.allowed_lanes(self._edge_at(self.station), self.sc.ego.vclass)
+        except (LookupError, SplineplanError):
+            return ()
+
     def _lane_width(self) -> float | None:
         """Width [m] of the lanes of the route's edge where the vehicle is (``None``: none
         known)."""
-        edge = self._edge_at(self.station)
-        try:
-            lanes = [ln for ln in self.net.lanes_of(edge) if ln.allows(self.sc.ego.vclass)]
-        except (LookupError, SplineplanError):
-            return None
+        lanes = self._edge_lanes()
         return float(min(ln.width for ln in lanes)) if lanes else None
 
     def _new_plans_near(self) -> list[MovingObstacle]:
@@ -503,15 +514,15 @@ class Replanning(Perception):
         self.window_end = window_end
         self.lane_change = self._lane_change_ahead() if self.keep_lane else None
 
-    def _lane_change_ahead(self) -> tuple[float, int, float] | None:
+    def _lane_change_ahead(self) -> LaneChange | None:
         """Where the plan first reaches into another lane of the edge the vehicle is on
-        (before the next junction): the plan's station [m], that lane's index (from the
-        right) and the lanes' width [m]; ``None`` if it keeps its lane or is in a
-        junction (:func:`.lanes.lane_entry`)."""
+        (before the next junction; :func:`.lanes.lane_entry`); ``None`` if it keeps its
+        lane (or reaches off the road) or is in a junction."""
         c = self.corridor
-        width = self._lane_width()
-        if c is None or width is None:
+        lanes = self._edge_lanes()
+        if c is None or not lanes:
             return None
+        width = float(min(ln.width for ln in lanes))
         nxt = c.length
         for a, b in self._junction_spans:
             if b > self.station:
@@ -531,10 +542,11 @@ class Replanning(Perception):
         ego = self.sc.ego
         found = lane_entry(sl[:, 1], right, side_reach(turn, ego.length / 2.0, ego.width / 2.0),
                            lane_width=width)
-        if found is None:
+        if found is None or not 0 <= found[1] < len(lanes):
             return None
         k, lane = found
-        return float(self.path_s[ahead][k]), lane, width
+        return LaneChange(float(self.path_s[ahead][k]), lane, width,
+                          f"{self._edge_at(self.station)}_{lanes[lane].index}")
 
     def _reroute(self, err: RoadBlockedError) -> tuple[bool, Any]:
         """Level 1 again with the blocked edge avoided. Returns (done, detail or error)."""
