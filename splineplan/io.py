@@ -235,7 +235,8 @@ def load_plan(directory: str | PathLike[str]) -> SavedPlan:
 
 
 def read_trajectory_csv(path: str | PathLike[str]) -> TrajectorySamples:
-    """Read a trajectory CSV by its header (``t, x, y, heading, speed`` needed).
+    """Read a trajectory CSV by its header (``t, x, y, heading, speed`` needed; other
+    columns than :data:`TRAJECTORY_COLUMNS` are skipped).
 
     Without a ``curvature`` column (a simulation's driven path) the curvature is the
     heading's change per metre; without ``s``, the arc length of ``x, y``.
@@ -254,12 +255,15 @@ def read_trajectory_csv(path: str | PathLike[str]) -> TrajectorySamples:
     missing = [c for c in TRAJECTORY_COLUMNS[:5] if c not in header]
     if missing:
         raise ScenarioError(f"trajectory file {p} lacks the columns {', '.join(missing)}")
+    # only the columns read here need be numbers (a driven path has text columns too)
+    use = [i for i, h in enumerate(header) if h in TRAJECTORY_COLUMNS]
     try:
-        data = np.array([[float(v) for v in r] for r in rows[1:] if r], dtype=float)
-    except ValueError as err:
-        raise ScenarioError(f"trajectory file {p} has a non-numeric value: {err}") from err
-    data = data.reshape(-1, len(header))
-    col = {h: data[:, i] for i, h in enumerate(header)}
+        data = np.array([[float(r[i]) for i in use] for r in rows[1:] if r], dtype=float)
+    except (ValueError, IndexError) as err:
+        raise ScenarioError(f"trajectory file {p} has a non-numeric value or a short "
+                            f"row: {err}") from err
+    data = data.reshape(-1, len(use))
+    col = {header[i]: data[:, k] for k, i in enumerate(use)}
     s = col["s"] if "s" in col else _arc_length(col["x"], col["y"])
     if "curvature" in col:
         kappa = col["curvature"]

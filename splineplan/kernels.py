@@ -1,10 +1,13 @@
-"""Compiled inner loops of level 3: the footprint check and equation (3)'s rounds.
+"""Compiled inner loops: level 3's footprint check and equation (3)'s rounds, and the
+rectangle distances of the closed loop (bodies, plans, pairs of vehicles).
 
 Level 3 checks the vehicle's footprint a few thousand times per route on tens to hundreds
-of curve samples each; as array code it spent most of its time in the overhead of small
-numpy calls. These loops run over the samples one at a time, compiled with numba and
-cached on disk after the first run. The thin callers are
-:class:`splineplan.footprint._Checker` and :class:`splineplan.optimiser._Optimiser`.
+of curve samples each, and the closed loop measures rectangles against a path at every
+step of every planned vehicle; as array code they spent most of their time in the overhead
+of small numpy calls. These loops run over the samples one at a time, compiled with numba
+and cached on disk after the first run. The thin callers are
+:class:`splineplan.footprint._Checker`, :class:`splineplan.optimiser._Optimiser`,
+:func:`splineplan.spacetime.box_gap` and :func:`splineplan.closedloop.bodies.meetings`.
 
 The kernels that call one another live in this one file on purpose: numba's on-disk cache
 is invalidated per file, so a kernel calling a kernel of another file would keep running
@@ -695,3 +698,131 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
                    ne1[a - a0:b - a0], ne2[a - a0:b - a0], kap, sl, sc)
         return True
     return False
+
+
+@njit(cache=True, inline="always")
+def _corner_gap_one(dx: float, dy: float, cf: float, sf: float, ct: float, st: float,
+                    lt: float, wt: float, lf: float, wf: float) -> float:  # pragma: no cover
+    """Smallest distance [m] from the corners of a rectangle (heading ``cf``, ``sf``, half
+    sizes ``lf``, ``wf``) centred at (``dx``, ``dy``) from another (heading ``ct``,
+    ``st``, half sizes ``lt``, ``wt``) to that other."""
+    best = np.inf
+    for sx, sy in ((1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)):
+        px = dx + (sx * lf) * cf - (sy * wf) * sf
+        py = dy + (sx * lf) * sf + (sy * wf) * cf
+        qx = max(abs(px * ct + py * st) - lt, 0.0)
+        qy = max(abs(py * ct - px * st) - wt, 0.0)
+        best = min(best, np.hypot(qx, qy))
+    return best
+
+
+@njit(cache=True)
+def box_gap_one(x1: float, y1: float, h1: float, l1: float, w1: float, x2: float,
+                y2: float, h2: float, l2: float, w2: float) -> float:  # pragma: no cover
+    """:func:`splineplan.spacetime.box_gap` of one pair of rectangles (centre, heading
+    [rad], length and width [m] each): their distance [m], 0 where they overlap."""
+    c1x, s1x = np.cos(h1), np.sin(h1)
+    c2x, s2x = np.cos(h2), np.sin(h2)
+    l1, w1, l2, w2 = l1 / 2.0, w1 / 2.0, l2 / 2.0, w2 / 2.0
+    dx, dy = x2 - x1, y2 - y1
+    cos = abs(c1x * c2x + s1x * s2x)
+    sin = abs(c1x * s2x - s1x * c2x)
+    if (abs(dx * c1x + dy * s1x) <= l1 + l2 * cos + w2 * sin
+            and abs(dy * c1x - dx * s1x) <= w1 + l2 * sin + w2 * cos
+            and abs(dx * c2x + dy * s2x) <= l2 + l1 * cos + w1 * sin
+            and abs(dy * c2x - dx * s2x) <= w2 + l1 * sin + w1 * cos):
+        return 0.0
+    return min(_corner_gap_one(-dx, -dy, c2x, s2x, c1x, s1x, l1, w1, l2, w2),
+               _corner_gap_one(dx, dy, c1x, s1x, c2x, s2x, l2, w2, l1, w1))
+
+
+@njit(cache=True)
+def body_meetings(body: NDArray[np.int64], n_bodies: int, times: FloatArray,
+                  centres: FloatArray, heads: FloatArray, lengths: FloatArray,
+                  widths: FloatArray, margins: FloatArray, path_s: FloatArray,
+                  path_xy: FloatArray, path_h: FloatArray, ego_l: float, ego_w: float
+                  ) -> FloatArray:  # pragma: no cover - compiled
+    """:func:`splineplan.closedloop.bodies.meetings`: for each body, the first and last
+    path station [m] its rectangles come within their margin of the ego's footprint, and
+    the first and last time [s] they do (NaN where never)."""
+    out = np.full((n_bodies, 4), np.nan)
+    ego_d = np.hypot(ego_l, ego_w)
+    for k in range(len(times)):
+        reach = 0.5 * (np.hypot(lengths[k], widths[k]) + ego_d) + margins[k]
+        r2 = reach * reach
+        cx, cy = centres[k, 0], centres[k, 1]
+        b = body[k]
+        for n in range(len(path_s)):
+            ex, ey = path_xy[n, 0] - cx, path_xy[n, 1] - cy
+            if ex * ex + ey * ey > r2:
+                continue
+            if box_gap_one(cx, cy, heads[k], lengths[k], widths[k], path_xy[n, 0],
+                           path_xy[n, 1], path_h[n], ego_l, ego_w) > margins[k]:
+                continue
+            if np.isnan(out[b, 0]):
+                out[b, 0], out[b, 1] = path_s[n], path_s[n]
+                out[b, 2], out[b, 3] = times[k], times[k]
+            else:
+                out[b, 0] = min(out[b, 0], path_s[n])
+                out[b, 1] = max(out[b, 1], path_s[n])
+                out[b, 2] = min(out[b, 2], times[k])
+                out[b, 3] = max(out[b, 3], times[k])
+    return out
+
+
+@njit(cache=True)
+def crosses(pxy: FloatArray, ph: FloatArray, inside: NDArray[np.bool_], xy: FloatArray,
+            heading: FloatArray, lo_x: float, lo_y: float, hi_x: float, hi_y: float,
+            near: float, angle: float) -> bool:  # pragma: no cover - compiled
+    """:func:`splineplan.closedloop.cooperate._crosses`: whether a plan's point ``inside``
+    the path's box comes within ``near`` [m] of a path point inside the box (``lo``,
+    ``hi``) at more than ``angle`` [rad] from the path's heading there."""
+    for j in range(len(xy)):
+        x, y = xy[j, 0], xy[j, 1]
+        if not (lo_x <= x <= hi_x and lo_y <= y <= hi_y):
+            continue
+        for i in range(len(pxy)):
+            if not inside[i]:
+                continue
+            if np.hypot(pxy[i, 0] - x, pxy[i, 1] - y) >= near:
+                continue
+            d = ph[i] - heading[j]
+            if abs(np.arctan2(np.sin(d), np.cos(d))) > angle:
+                return True
+    return False
+
+
+@njit(cache=True)
+def box_gaps(c1: FloatArray, h1: FloatArray, l1: FloatArray, w1: FloatArray, c2: FloatArray,
+             h2: FloatArray, l2: FloatArray, w2: FloatArray
+             ) -> FloatArray:  # pragma: no cover - compiled
+    """:func:`box_gap_one` of each pair of rectangles: centres ``(N, 2)`` [m], headings
+    ``(N,)`` [rad], lengths and widths ``(N,)`` [m] of each side."""
+    n = len(h1)
+    out = np.empty(n)
+    for i in range(n):
+        out[i] = box_gap_one(c1[i, 0], c1[i, 1], h1[i], l1[i], w1[i], c2[i, 0], c2[i, 1],
+                             h2[i], l2[i], w2[i])
+    return out
+
+
+@njit(cache=True)
+def first_in_circles(xy: FloatArray, i0: int, box: FloatArray, cx: FloatArray,
+                     cy: FloatArray, r: FloatArray) -> NDArray[np.int64]:  # pragma: no cover
+    """For each circle (centre ``cx``, ``cy``, radius ``r`` ``(k,)`` [m]), the first path
+    sample from ``i0`` on of ``xy`` ``(n, 2)`` [m] inside it, -1 where none is or where
+    the circle misses ``box`` (lowest x, highest x, lowest y, highest y of the samples
+    from ``i0`` on)."""
+    k = len(cx)
+    out = np.full(k, -1, dtype=np.int64)
+    for j in range(k):
+        if (cx[j] + r[j] < box[0] or cx[j] - r[j] > box[1] or cy[j] + r[j] < box[2]
+                or cy[j] - r[j] > box[3]):
+            continue
+        r2 = r[j] * r[j]
+        for i in range(i0, len(xy)):
+            dx, dy = xy[i, 0] - cx[j], xy[i, 1] - cy[j]
+            if dx * dx + dy * dy <= r2:
+                out[j] = i
+                break
+    return out

@@ -59,6 +59,11 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
                           nt.Tuple(_CHECKER)),),
         "smooth_steering": ((F2, F2, F2, F2, F1, F1, F1, I1, F3, I1, I1, I2, B1, i8, f8, f8,
                              f8, f8, f8, f8, f8, f8, i8, nt.Tuple(_CHECKER)),),
+        "box_gap_one": ((f8,) * 10,),
+        "body_meetings": ((I1, i8, F1, F2, F1, F1, F1, F1, F1, F2, F1, f8, f8),),
+        "crosses": ((F2, F1, B1, F2, F1, f8, f8, f8, f8, f8, f8),),
+        "box_gaps": ((F2, F1, F1, F1, F2, F1, F1, F1),),
+        "first_in_circles": ((F2, i8, F1, F1, F1, F1),),
     }),
     "splineplan.spacetime": (1.5, {
         "_drive": ((F1, F1, F1, F1, f8, f8, f8, f8),),

@@ -37,6 +37,7 @@ from numba import njit
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from splineplan import kernels
 from splineplan.errors import ParameterError
 from splineplan.geometry import FloatArray, kernel_floats, wrap_angle
 from splineplan.obstacles import Obstacles
@@ -278,37 +279,13 @@ def box_gap(c1: FloatArray, h1: FloatArray, size1: BoxSize, c2: FloatArray,
     frame); rectangles that cross without a corner inside the other are caught by the
     separating-axis test.
     """
-    c1x, s1x = np.cos(h1), np.sin(h1)
-    c2x, s2x = np.cos(h2), np.sin(h2)
-    l1, w1 = size1[0] / 2.0, size1[1] / 2.0
-    l2, w2 = size2[0] / 2.0, size2[1] / 2.0
-    dx, dy = c2[:, 0] - c1[:, 0], c2[:, 1] - c1[:, 1]
-    gap = np.minimum(_corner_gap(-dx, -dy, c2x, s2x, c1x, s1x, l1, w1, l2, w2),
-                     _corner_gap(dx, dy, c1x, s1x, c2x, s2x, l2, w2, l1, w1))
-    # separating axes: the four sides' directions
-    cos = np.abs(c1x * c2x + s1x * s2x)
-    sin = np.abs(c1x * s2x - s1x * c2x)
-    overlap = ((np.abs(dx * c1x + dy * s1x) <= l1 + l2 * cos + w2 * sin)
-               & (np.abs(dy * c1x - dx * s1x) <= w1 + l2 * sin + w2 * cos)
-               & (np.abs(dx * c2x + dy * s2x) <= l2 + l1 * cos + w1 * sin)
-               & (np.abs(dy * c2x - dx * s2x) <= w2 + l1 * sin + w1 * cos))
-    return np.where(overlap, 0.0, gap)
+    n = len(h1)
 
-
-def _corner_gap(dx: FloatArray, dy: FloatArray, cf: FloatArray, sf: FloatArray,
-                ct: FloatArray, st: FloatArray, lt: float | FloatArray, wt: float | FloatArray,
-                lf: float | FloatArray, wf: float | FloatArray) -> FloatArray:
-    """Smallest distance ``(N,)`` from the corners of the rectangles with heading
-    (``cf``, ``sf``) and half sizes ``lf``, ``wf``, centred at (``dx``, ``dy``) from the
-    others, to those others (heading ``ct``, ``st``, half sizes ``lt``, ``wt``)."""
-    best = np.full(len(dx), np.inf)
-    for sx, sy in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
-        px = dx + (sx * lf) * cf - (sy * wf) * sf
-        py = dy + (sx * lf) * sf + (sy * wf) * cf
-        qx = np.maximum(np.abs(px * ct + py * st) - lt, 0.0)
-        qy = np.maximum(np.abs(py * ct - px * st) - wt, 0.0)
-        best = np.minimum(best, np.hypot(qx, qy))
-    return best
+    def each(a: float | FloatArray) -> FloatArray:
+        return kernel_floats(np.broadcast_to(np.asarray(a, dtype=float), (n,)))
+    return kernels.box_gaps(kernel_floats(c1), kernel_floats(h1), each(size1[0]),
+                            each(size1[1]), kernel_floats(c2), kernel_floats(h2),
+                            each(size2[0]), each(size2[1]))
 
 
 def speed_among(

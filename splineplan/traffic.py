@@ -250,11 +250,9 @@ class Others:
             self.stopped = np.zeros(self.n, dtype=bool)
             self.n_stopped = 0
         half = 0.5 * self.length
-        self.centre = np.empty((self.n, 2))
-        np.subtract(a[:, 0], half * self.cos, out=self.centre[:, 0])
-        np.subtract(a[:, 1], half * self.sin, out=self.centre[:, 1])
-        self.cx = self.centre[:, 0]
-        self.cy = self.centre[:, 1]
+        self.cx = a[:, 0] - half * self.cos  # contiguous, as the compiled loops take them
+        self.cy = a[:, 1] - half * self.sin
+        self.centre = np.column_stack((self.cx, self.cy))
         self.radius = 0.5 * np.hypot(self.length, self.width)
 
 

@@ -6,11 +6,12 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LineString, Polygon
 
-from splineplan.closedloop.bodies import bodies_along, body_path, meeting
+from splineplan.closedloop.bodies import bodies_along, body_path, meeting, meetings
 
 
 def _arc(radius: float, n: int = 400) -> np.ndarray:
@@ -81,3 +82,42 @@ def test_a_long_body_sweeps_over_the_lane_beside_its_turn() -> None:
     # the same path 3 m farther inside is never met
     assert meeting(t, centres, heads, (length, width), s, xy + 3.0 * inward, h, (4.5, 1.8),
                    0.0) is None
+
+
+def _box(c: np.ndarray, hd: float, ln: float, wd: float) -> Polygon:
+    u, n = np.array([math.cos(hd), math.sin(hd)]), np.array([-math.sin(hd), math.cos(hd)])
+    return Polygon([c + u * ln / 2 + n * wd / 2, c + u * ln / 2 - n * wd / 2,
+                    c - u * ln / 2 - n * wd / 2, c - u * ln / 2 + n * wd / 2])
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n_bodies=st.integers(1, 4))
+def test_meetings_of_several_bodies_are_shapelys(seed: int, n_bodies: int) -> None:
+    """Random rectangles of several bodies (each its size and margin) around a curved
+    path: each body's first and last station and time met are those of the pairs whose
+    shapely distance is within that body's margin."""
+    rng = np.random.default_rng(seed)
+    s = np.linspace(0.0, 30.0, 61)
+    xy = np.column_stack((s, 0.01 * (s - 10.0) ** 2))
+    h = np.arctan(0.02 * (s - 10.0))
+    rows = rng.integers(3, 9, n_bodies)
+    body = np.repeat(np.arange(n_bodies), rows)
+    k = len(body)
+    times = rng.uniform(0.0, 6.0, k)
+    centres = np.column_stack((rng.uniform(-5.0, 35.0, k), rng.uniform(-6.0, 10.0, k)))
+    heads = rng.uniform(-math.pi, math.pi, k)
+    lengths = np.repeat(rng.uniform(4.0, 18.0, n_bodies), rows)
+    widths = np.repeat(rng.uniform(1.6, 2.6, n_bodies), rows)
+    margins = np.repeat(rng.uniform(0.0, 1.0, n_bodies), rows)
+    got = meetings(body, n_bodies, times, centres, heads, lengths, widths, margins, s, xy,
+                   h, (4.5, 1.8))
+    ego = [_box(xy[i], h[i], 4.5, 1.8) for i in range(len(s))]
+    for b in range(n_bodies):
+        hits = [(times[r], s[i]) for r in np.flatnonzero(body == b) for i in range(len(s))
+                if _box(centres[r], heads[r], lengths[r], widths[r]).distance(ego[i])
+                <= margins[r] + 1e-9]
+        if not hits:
+            assert np.isnan(got[b]).all()
+            continue
+        tt, ss = zip(*hits, strict=True)
+        assert got[b] == pytest.approx([min(ss), max(ss), min(tt), max(tt)])

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import subprocess
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -26,9 +27,11 @@ from splineplan.sim import simulate
 SCENARIOS = ROOT / "scenarios"
 
 
-def _rows(path: Path) -> list[dict[str, float]]:
+def _rows(path: Path) -> list[dict[str, Any]]:
+    """A ``trajectory.csv``'s rows: numbers, and its text columns as text."""
     with path.open() as fh:
-        return [{k: float(v) for k, v in r.items()} for r in csv.DictReader(fh)]
+        return [{k: v if k in ("lane", "why_slow") else float(v) for k, v in r.items()}
+                for r in csv.DictReader(fh)]
 
 
 def _two(tmp_path: Path, a: str, b: str, *, duration: float = 60.0) -> Path:
@@ -101,6 +104,10 @@ def test_planned_vehicle_yields_to_published_plan(tmp_path: Path) -> None:
     a_out = min(row["t"] for row in a_rows if row["x"] > x_b + clear)
     b_in = min(row["t"] for row in b_rows if row["y"] > y_a - clear)
     assert a_out <= b_in
+    # the record says why 'b' was slow before it crossed, and which lane it was on
+    held = {row["why_slow"] for row in b_rows if row["t"] < b_in}
+    assert "waiting for the published plan of 'a'" in held
+    assert {row["lane"] for row in b_rows} >= {"B0B1_0", "B1B2_0"}
 
 
 def _small_cfg(tmp_path: Path, end: float = 60.0) -> Path:
@@ -445,6 +452,33 @@ def test_plan_keeps_clear_of_others_plans() -> None:
     late = MovingObstacle("b", t, np.column_stack((-10.0 + 0.0 * t, -40.0 + 4.0 * t)),
                           np.full(len(t), np.pi / 2), 4.5, 1.8)  # at (-10, 0) at t = 10 s
     assert not keeps_clear_of(stop, [late], 0.0, margin=0.3)
+
+
+def test_plans_that_cross_the_path_are_grown_by_the_pad() -> None:
+    """Others' plans before the vehicle in priority: one that crosses the path (or comes
+    the other way) is grown by the pad on every side, one alongside it is not (two
+    vehicles may drive side by side), one far away or later in priority is left out."""
+    from splineplan.closedloop.cooperate import Published, plans_before
+    from splineplan.spacetime import MovingObstacle
+
+    t = np.arange(0.0, 10.01, 0.5)
+    xy = np.column_stack((np.linspace(-30.0, 30.0, 61), np.zeros(61)))  # the path, east
+    h = np.zeros(61)
+
+    def plan(vid: str, x0: float, y0: float, heading: float) -> MovingObstacle:
+        return MovingObstacle(vid, t, np.column_stack((x0 + 3.0 * t * math.cos(heading),
+                                                       y0 + 3.0 * t * math.sin(heading))),
+                              np.full(len(t), heading), 4.5, 1.8)
+    board = {"cross": Published(0, plan("cross", 5.0, -15.0, math.pi / 2)),
+             "beside": Published(1, plan("beside", -20.0, 3.2, math.radians(10.0))),
+             "oncoming": Published(2, plan("oncoming", 20.0, -3.2, math.pi)),
+             "far": Published(3, plan("far", 0.0, 60.0, 0.0)),
+             "after": Published(9, plan("after", 0.0, 0.0, math.pi / 2))}
+    got = {p.id: p for p in plans_before(board, "me", 5, xy, h, 0.0, pad=1.0)}
+    assert set(got) == {"cross", "beside", "oncoming"}
+    assert (got["cross"].length, got["cross"].width) == (6.5, 3.8)
+    assert (got["oncoming"].length, got["oncoming"].width) == (6.5, 3.8)
+    assert (got["beside"].length, got["beside"].width) == (4.5, 1.8)
 
 
 def test_waiting_vehicle_plans_again_when_its_plan_moves_on() -> None:

@@ -17,6 +17,7 @@ from hypothesis import strategies as st
 
 from splineplan.corridor import Corridor
 from splineplan.geometry import box_corners
+from splineplan.kernels import box_gap_one
 from splineplan.planner import plan_corridor
 from splineplan.roadmap import RoadmapParams
 from splineplan.spacetime import MovingObstacle, box_gap, published, retime, speed_among
@@ -70,6 +71,8 @@ def test_box_gap_is_shapelys_distance(x: float, y: float, h1: float, h2: float,
     got = box_gap(np.array([[0.0, 0.0]]), np.array([h1]), (L, W), np.array([[x, y]]),
                   np.array([h2]), (ln, wd))
     assert got[0] == pytest.approx(want, abs=1e-9)
+    one = box_gap_one(0.0, 0.0, h1, L, W, x, y, h2, ln, wd)  # the compiled form
+    assert one == pytest.approx(want, abs=1e-9)
 
 
 def test_a_crossing_car_that_comes_first_is_yielded_to_with_the_margin() -> None:

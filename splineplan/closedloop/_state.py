@@ -84,11 +84,13 @@ class DriverState:
     board_seen: int  # the board's count of plans when this one last planned
     trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among
     why_slow: str
+    held_by: str
     wait_replan_at: float
     conflicts: list[dict[str, Any]]
     signals: Signals
     _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
     _body_paths: dict[tuple[str, str], Any]  # (lane, via) -> (bodies.BodyPath, lane) | None
+    _bodies_now: dict[tuple[Any, float], Any]  # (LanePlace, length) -> predicted body | None
     _pl: tuple[list[float], ...]
     _pl_np: tuple[FloatArray, FloatArray]
     _times_key: tuple[float, float] | None

@@ -12,14 +12,19 @@ the body at constant speed along the bus's lanes for a few seconds (:func:`body_
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from splineplan.geometry import FloatArray, dedupe_polyline, polyline_stations
-from splineplan.spacetime import box_gap
+from splineplan.geometry import (
+    FloatArray,
+    dedupe_polyline,
+    kernel_floats,
+    kernel_ints,
+    polyline_stations,
+)
+from splineplan.kernels import body_meetings
 
 #: Vehicles at least this long [m] have their bodies predicted through junctions (a car's
 #: body keeps to its lane within a few centimetres).
@@ -120,31 +125,8 @@ def meetings(body: NDArray[np.int64], n_bodies: int, times: FloatArray, centres:
     index, time [s], centre, heading, length, width [m], and the margin [m] of each),
     ``(n_bodies, 4)`` first and last path station [m] met and first and last time [s]
     meeting for each body, NaN for a body that never meets the path."""
-    out = np.full((n_bodies, 4), np.nan)
-    k, n = len(times), len(path_s)
-    if not k or not n:
-        return out
-    reach = 0.5 * (np.hypot(lengths, widths) + math.hypot(*ego)) + margins
-    # only path samples within reach of some body
-    d2 = ((path_xy[None, :, :] - centres[:, None, :]) ** 2).sum(axis=2)  # (k, n)
-    near = d2 <= (reach * reach)[:, None]
-    if not near.any():
-        return out
-    ki, ni = np.nonzero(near)
-    gap = box_gap(centres[ki], heads[ki], (lengths[ki], widths[ki]), path_xy[ni],
-                  path_h[ni], ego)
-    hit = gap <= margins[ki]
-    if not hit.any():
-        return out
-    ki, ni = ki[hit], ni[hit]
-    b, st, tt = body[ki], path_s[ni], times[ki]
-    out[:, 0] = np.inf
-    out[:, 1] = -np.inf
-    out[:, 2] = np.inf
-    out[:, 3] = -np.inf
-    np.minimum.at(out[:, 0], b, st)
-    np.maximum.at(out[:, 1], b, st)
-    np.minimum.at(out[:, 2], b, tt)
-    np.maximum.at(out[:, 3], b, tt)
-    out[~np.isin(np.arange(n_bodies), b)] = np.nan
-    return out
+    return body_meetings(kernel_ints(body), n_bodies, kernel_floats(times),
+                         kernel_floats(centres), kernel_floats(heads), kernel_floats(lengths),
+                         kernel_floats(widths), kernel_floats(margins), kernel_floats(path_s),
+                         kernel_floats(path_xy), kernel_floats(path_h), float(ego[0]),
+                         float(ego[1]))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from splineplan import kernels
 from splineplan.closedloop.bodies import (
     HORIZON,
     MOVING,
@@ -76,6 +77,7 @@ class Control(Perception):
         self.signals = signals
         if self.traj is None:
             self.why_slow = f"no plan ({self.reason})" if self.reason else "no plan yet"
+            self.held_by = self.why_slow
             return self._move()
         sc, ego = self.sc, self.sc.ego
         tp = sc.trajectory
@@ -106,6 +108,8 @@ class Control(Perception):
             v_new = 0.0
         self.u, self.v = u, v_new
         self.limited = limited
+        self.held_by = ((self.why_slow or "coming to the end of its plan")
+                        if v_cap < v_plan or self.waiting_for else "")
         j, f = _locate(u, ps)
         x = px[j] + f * (px[j + 1] - px[j])
         y = py[j] + f * (py[j + 1] - py[j])
@@ -134,7 +138,8 @@ class Control(Perception):
         such sample. Only the samples within the vehicle's bounding circle plus that reach
         can be in reach: a vehicle whose circle misses the bounding box of the samples
         ahead is skipped, and the first sample in each other one's circle is found for all
-        of them at once (arrays); the samples after it, by
+        of them at once (:func:`~splineplan.kernels.first_in_circles`); the samples after
+        it, by
         :func:`~splineplan.traffic.first_in_reach`.
         """
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
@@ -149,23 +154,13 @@ class Control(Perception):
             i0 = bisect.bisect_left(self._pl[0], self.u)  # first sample ahead
             cand = []  # (first sample in the circle, vehicle, centre x, y, circle's radius)
             if i0 < len(full_s):
-                x0, x1, y0, y1 = (b[i0] for b in self._ahead_box)
-                ocx, ocy = o.cx, o.cy
+                box = np.array([b[i0] for b in self._ahead_box])
                 orad = o.radius + reach
-                near = np.flatnonzero(~((ocx + orad < x0) | (ocx - orad > x1)
-                                        | (ocy + orad < y0) | (ocy - orad > y1)))
-                if len(near):
-                    # the first sample ahead in each one's circle, all at once
-                    dx = self.full_xy[i0:, 0][None, :] - ocx[near, None]
-                    dy = self.full_xy[i0:, 1][None, :] - ocy[near, None]
-                    r = orad[near]
-                    inside = dx * dx + dy * dy <= (r * r)[:, None]
-                    hit = inside.any(axis=1)
-                    first = inside.argmax(axis=1)
-                    for k in np.flatnonzero(hit).tolist():
-                        j = int(near[k])
-                        cand.append((i0 + int(first[k]), j, float(ocx[j]), float(ocy[j]),
-                                     float(r[k])))
+                # the first sample ahead in each one's circle, all at once
+                first = kernels.first_in_circles(self.full_xy, i0, box, o.cx, o.cy, orad)
+                for j in np.flatnonzero(first >= 0).tolist():
+                    cand.append((int(first[j]), j, float(o.cx[j]), float(o.cy[j]),
+                                 float(orad[j])))
             cand.sort()
             reach2 = reach * reach
             base = self.u + ego.length / 2.0 + sim.min_gap
@@ -350,15 +345,11 @@ class Control(Perception):
             i = where.get(place.id)
             if i is None or place.speed < MOVING:
                 continue
-            known = self._body_path(place)
-            if known is None:
-                continue
-            lanes, index = known
-            at = lanes.station(index, place.pos)
             length, width = float(o.length[i]), float(o.width[i])
-            if index == 0 and at + place.speed * HORIZON < float(lanes.starts[1]):
-                continue  # does not reach the junction within the horizon
-            times, centres, heads = bodies_along(lanes, at, place.speed, length)
+            body = self._body_of(place, length)
+            if body is None:
+                continue
+            times, centres, heads = body
             rows.append((times, centres, heads, length, width, sc.roadmap.safety_margin))
             whys.append(f"giving way to the body of vehicle '{place.id}' sweeping through "
                         "the junction")
@@ -466,10 +457,30 @@ class Control(Perception):
                 return stop  # one that reaches over the line already stands
         return math.inf
 
+    def _body_of(self, place: LanePlace, length: float
+                 ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """The predicted body (:func:`~.bodies.bodies_along`) of a moving long vehicle of
+        ``length`` [m] at ``place``, ``None`` where it approaches no junction or does not
+        reach it within :data:`~.bodies.HORIZON`. Kept for the step (planned vehicles of
+        one run share it: the run clears it each step)."""
+        key = (place, length)
+        if key in self._bodies_now:
+            return self._bodies_now[key]
+        found = None
+        known = self._body_path(place)
+        if known is not None:
+            lanes, index = known
+            at = lanes.station(index, place.pos)
+            if index > 0 or at + place.speed * HORIZON >= float(lanes.starts[1]):
+                found = bodies_along(lanes, at, place.speed, length)
+        self._bodies_now[key] = found
+        return found
+
     def _body_path(self, place: LanePlace) -> tuple[BodyPath, int] | None:
         """The lanes a long vehicle's front follows through the next junction (the lane
         before it, its internal lanes and the lane after), and which of them it is on;
-        ``None`` where it approaches none. Kept per lane and internal lane."""
+        ``None`` where it approaches none. Kept per lane and internal lane (planned
+        vehicles of one run share them)."""
         key = (place.lane, place.via)
         if key in self._body_paths:
             return self._body_paths[key]

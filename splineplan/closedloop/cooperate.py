@@ -19,7 +19,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from splineplan.geometry import FloatArray
+from splineplan import kernels
+from splineplan.geometry import FloatArray, kernel_floats
 from splineplan.spacetime import MovingObstacle, box_gap
 
 #: Seconds between replans while a vehicle waits for another's published plan.
@@ -96,17 +97,10 @@ def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray,
     Only the plan's points ``inside`` the path's bounding box grown by :data:`NEAR`, and
     the path's points inside the plan's bounding ``box`` grown by it, can meet."""
     lo, hi = box[0] - NEAR, box[1] + NEAR
-    mine = np.flatnonzero(np.all((xy >= lo) & (xy <= hi), axis=1))
-    theirs = np.flatnonzero(inside)
-    if not len(mine) or not len(theirs):
-        return False
-    pxy, pxy_h = plan.xy[theirs], plan.heading[theirs]
-    d = np.hypot(pxy[:, None, 0] - xy[None, mine, 0], pxy[:, None, 1] - xy[None, mine, 1])
-    near_plan, near_path = np.nonzero(d < NEAR)
-    if not len(near_plan):
-        return False
-    diff = np.abs(np.angle(np.exp(1j * (pxy_h[near_plan] - heading[mine][near_path]))))
-    return bool(np.any(diff > CROSSING))
+    return bool(kernels.crosses(kernel_floats(plan.xy), kernel_floats(plan.heading),
+                                np.ascontiguousarray(inside, dtype=bool), kernel_floats(xy),
+                                kernel_floats(heading), float(lo[0]), float(lo[1]),
+                                float(hi[0]), float(hi[1]), NEAR, CROSSING))
 
 
 def keeps_clear_of(mine: MovingObstacle, others: list[MovingObstacle], t0: float, *,

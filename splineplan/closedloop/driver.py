@@ -28,7 +28,7 @@ from splineplan.errors import ScenarioError, VehicleClassError
 from splineplan.geometry import FloatArray, heading_from_sumo_angle
 from splineplan.obstacles import Obstacles
 from splineplan.scenario import Scenario
-from splineplan.sumo.world import VehicleState
+from splineplan.sumo.world import LanePlace, VehicleState
 from splineplan.traffic import NO_OTHERS, Others, RoadCheck
 
 #: Who drives the ego: ``planner`` (splineplan, through ``moveToXY``), ``sumo`` (SUMO's
@@ -98,6 +98,9 @@ class Driver(Replanning, Control):
         self.plan_seconds = 0.0  # wall time [s] of the planning calls
         self._obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]] = {}
         self._body_paths: dict[tuple[str, str], tuple[BodyPath, int] | None] = {}
+        # (place, length) -> predicted body or None, this step's (see Control._body_of)
+        self._bodies_now: dict[tuple[LanePlace, float],
+                               tuple[FloatArray, FloatArray, FloatArray] | None] = {}
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.station = 0.0
         self.deviation = 0.0
@@ -121,6 +124,7 @@ class Driver(Replanning, Control):
         self.go_at = 0.0  # when its plan has it move on, while it waits [s]
         self.conflicts: list[dict[str, Any]] = []
         self.why_slow = ""  # what holds the vehicle back (speed control), in words
+        self.held_by = ""  # the same where it held the last step's speed below the plan's
         self.stand_since: float | None = None
         self.stuck: list[dict[str, Any]] = []  # stands longer than STUCK_AFTER
         self._beside_at: tuple[float, float] | None = None
@@ -240,7 +244,7 @@ class Driver(Replanning, Control):
         self.lateral = float(sl[1])
         self.rows.append((self.time, x, y, h, self.v, self.station, float(sl[1]), lane,
                           float(fx), float(fy), pos_err, clear_obs, clear_veh, int(off_road),
-                          self.limited))
+                          self.limited, self.held_by))
         self._watch_standing(now)
         if self.station >= self.goal_station:
             self.status = "arrived"

@@ -105,26 +105,9 @@ class _Min:
 
 def _gaps(c1: np.ndarray, h1: np.ndarray, s1: np.ndarray, c2: np.ndarray, h2: np.ndarray,
           s2: np.ndarray) -> np.ndarray:
-    """:func:`~splineplan.spacetime.box_gap` for rectangles of several sizes (grouped)."""
-    out = np.empty(len(c1))
-    if not len(c1):
-        return out
-    if (s1 == s1[0]).all() and (s2 == s2[0]).all():  # the common case: one size each
-        return box_gap(c1, h1, (s1[0, 0], s1[0, 1]), c2, h2, (s2[0, 0], s2[0, 1]))
-    # a key per pair of sizes: few sizes, so plain integers (the sizes found by their
-    # row's bytes: a row-wise unique sorts lexically, far slower for a few sizes)
-    both = np.ascontiguousarray(np.vstack((s1, s2)))
-    _, first, code = np.unique(both.view(np.dtype((np.void, both.dtype.itemsize * 2))
-                                         ).reshape(-1), return_index=True,
-                               return_inverse=True)
-    sizes = both[first]
-    code = code.reshape(-1)
-    key = code[:len(c1)] * len(sizes) + code[len(c1):]
-    for k in np.unique(key):
-        m = key == k
-        a, b = sizes[k // len(sizes)], sizes[k % len(sizes)]
-        out[m] = box_gap(c1[m], h1[m], (a[0], a[1]), c2[m], h2[m], (b[0], b[1]))
-    return out
+    """:func:`~splineplan.spacetime.box_gap` for rectangles of several sizes (``s1``,
+    ``s2``: ``(N, 2)`` length and width [m] of each)."""
+    return box_gap(c1, h1, (s1[:, 0], s1[:, 1]), c2, h2, (s2[:, 0], s2[:, 1]))
 
 
 def _ttc(centre: np.ndarray, head: np.ndarray, speed: np.ndarray, size: np.ndarray,

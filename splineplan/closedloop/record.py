@@ -19,10 +19,13 @@ from splineplan.closedloop.replan import Replan
 from splineplan.metrics import CURVATURE_SPAN, dynamics, finite_or_none, summary_stats
 from splineplan.traffic import OFF_ROAD_TOLERANCE
 
-#: Columns of ``trajectory.csv`` (and ``lane``, kept in memory only), in a row's order.
+#: Columns of ``trajectory.csv``, in a row's order: ``lane`` is SUMO's lane under the
+#: vehicle, ``why_slow`` what held its speed back in words (empty where nothing did).
 COLUMNS = ("t", "x", "y", "heading", "speed", "station", "lateral", "lane", "sumo_x",
            "sumo_y", "position_error", "clearance_obstacles", "clearance_vehicles",
-           "off_road", "speed_limited")
+           "off_road", "speed_limited", "why_slow")
+#: The columns of text.
+TEXT_COLUMNS = ("lane", "why_slow")
 
 
 @dataclass(frozen=True, eq=False)
@@ -93,7 +96,7 @@ def driven_columns(rows: list[tuple[Any, ...]]) -> dict[str, np.ndarray]:
     cols: dict[str, np.ndarray] = {}
     for i, name in enumerate(COLUMNS):
         vals = [r[i] for r in rows]
-        cols[name] = np.array(vals, dtype=object if name == "lane" else float)
+        cols[name] = np.array(vals, dtype=object if name in TEXT_COLUMNS else float)
     dyn = dynamics(cols["t"], cols["x"], cols["y"], cols["speed"])
     cols.update(dyn)
     return cols
@@ -180,7 +183,7 @@ def vehicle_metrics(driver: Any, d: dict[str, np.ndarray], totals: RunTotals
 def write_vehicle(out: Path, driven: dict[str, np.ndarray], metrics: dict[str, Any]) -> None:
     """``trajectory.csv`` and ``metrics.json`` of one vehicle into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "trajectory.csv", {k: v for k, v in driven.items() if k != "lane"})
+    write_csv(out / "trajectory.csv", driven)
     write_json(out / "metrics.json", metrics)
 
 

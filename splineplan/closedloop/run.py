@@ -207,6 +207,10 @@ class _Run:
         self.wall_time = 0.0
         self._roads: dict[str, RoadCheck] = {}
         self.board: dict[str, Published] = {}  # the planned vehicles' latest plans
+        # what the drivers share of long vehicles' bodies: paths through junctions, and
+        # this step's predicted bodies (Control._body_of)
+        self._body_paths: dict[Any, Any] = {}
+        self._bodies_now: dict[Any, Any] = {}
         self._entered = 0
         self._published = 0  # plans published so far
         self.sizes: dict[str, tuple[float, float]] = {}  # vehicle types' length, width
@@ -361,6 +365,7 @@ class _Run:
                 bar.close()
 
     def _move_all(self) -> None:
+        self._bodies_now.clear()
         for d in self.drivers:
             if not (d.in_sim and d.kind == "planner"):
                 continue
@@ -472,9 +477,11 @@ class _Run:
         self._join(d)
 
     def _join(self, d: Driver) -> None:
-        """A planned vehicle entered: its priority is the order of entering."""
+        """A planned vehicle entered: its priority is the order of entering; it shares the
+        run's record of long vehicles' bodies."""
         d.priority = self._entered
         self._entered += 1
+        d._body_paths, d._bodies_now = self._body_paths, self._bodies_now
         if self.multi:
             d.board = self.board
             d.publish = True
