@@ -826,3 +826,30 @@ def first_in_circles(xy: FloatArray, i0: int, box: FloatArray, cx: FloatArray,
                 out[j] = i
                 break
     return out
+
+
+@njit(cache=True)
+def blocked_samples(pts: FloatArray, head: FloatArray, length: float, width: float,
+                    oxy: FloatArray, ohead: FloatArray, js: NDArray[np.int64],
+                    o_length: float, o_width: float, reach: float, margin: float
+                    ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover
+    """:func:`splineplan.spacetime.occupancy` of one obstacle: at each of its times ``js``
+    (its centres ``oxy`` and headings ``ohead``, one row per time), the first and last
+    path sample (``pts``, ``head``) where a rectangle of ``length`` x ``width`` [m] comes
+    closer than ``margin`` [m] to it (``len(pts)`` and -1 where none does). Only samples
+    within ``reach`` [m] of its centre are measured."""
+    n, m = len(pts), len(oxy)
+    lo = np.full(m, n, dtype=np.int64)
+    hi = np.full(m, -1, dtype=np.int64)
+    r2 = reach * reach
+    for j in js:
+        ox, oy = oxy[j, 0], oxy[j, 1]
+        for i in range(n):
+            dx, dy = pts[i, 0] - ox, pts[i, 1] - oy
+            if dx * dx + dy * dy > r2:
+                continue
+            if box_gap_one(pts[i, 0], pts[i, 1], head[i], length, width, ox, oy, ohead[j],
+                           o_length, o_width) < margin:
+                lo[j] = min(lo[j], i)
+                hi[j] = max(hi[j], i)
+    return lo, hi

@@ -35,7 +35,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
-from scipy.spatial import cKDTree
 
 from splineplan import kernels
 from splineplan.errors import ParameterError
@@ -224,7 +223,7 @@ def occupancy(s: ArrayLike, xy: ArrayLike, heading: ArrayLike, times: ArrayLike,
     hi = np.full((k, m), np.nan)
     if k == 0 or m == 0 or n == 0:
         return Occupancy(tt, lo, hi)
-    tree = cKDTree(pts)
+    pts, head = kernel_floats(pts), kernel_floats(head)
     spacing = float(np.max(np.diff(st))) if n > 1 else 0.0
     ego_r = math.hypot(length, width) / 2.0
     for i, ob in enumerate(moving):
@@ -233,21 +232,13 @@ def occupancy(s: ArrayLike, xy: ArrayLike, heading: ArrayLike, times: ArrayLike,
         if len(js) == 0:
             continue
         reach = ego_r + math.hypot(ob.length, ob.width) / 2.0 + margin + spacing
-        near = tree.query_ball_point(oxy[js], r=reach)
-        pj = np.repeat(js, [len(c) for c in near])
-        if len(pj) == 0:
-            continue
-        pi = np.concatenate([np.asarray(c, dtype=np.int64) for c in near])
-        hit = box_gap(pts[pi], head[pi], (length, width), oxy[pj], ohead[pj],
-                      (ob.length, ob.width)) < margin
-        if not hit.any():
-            continue
-        pj, pi = pj[hit], pi[hit]
-        lo_i = np.full(m, n, dtype=np.int64)
-        hi_i = np.full(m, -1, dtype=np.int64)
-        np.minimum.at(lo_i, pj, pi)
-        np.maximum.at(hi_i, pj, pi)
+        lo_i, hi_i = kernels.blocked_samples(pts, head, float(length), float(width),
+                                             kernel_floats(oxy), kernel_floats(ohead), js,
+                                             float(ob.length), float(ob.width), reach,
+                                             float(margin))
         blocked = hi_i >= 0
+        if not blocked.any():
+            continue
         # one time step either side, one sample either side
         lo_w = np.minimum(lo_i, np.minimum(np.roll(lo_i, 1), np.roll(lo_i, -1)))
         hi_w = np.maximum(hi_i, np.maximum(np.roll(hi_i, 1), np.roll(hi_i, -1)))
