@@ -41,7 +41,7 @@ _CHECKER = (F1,) * 13 + (f8,) * 5 + (F1,) * 6 + (I1, F2, f8)
 #: between processes) and each loop's signatures. A module compiles in one process: the
 #: loops that call one another live in one module (see :mod:`splineplan.kernels`).
 SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
-    "splineplan.kernels": (8.5, {
+    "splineplan.kernels": (11.8, {
         "upper": ((F1, f8),),
         "lower": ((F1, f8),),
         "road_one": ((f8, f8, f8, f8, *(F1,) * 13, f8, f8, f8, f8, i8),),
