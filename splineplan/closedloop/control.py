@@ -15,6 +15,7 @@ import numpy as np
 from splineplan import kernels
 from splineplan.closedloop.bodies import (
     HORIZON,
+    LONG_VEHICLE,
     MOVING,
     BodyPath,
     bodies_along,
@@ -340,7 +341,7 @@ class Control(Perception):
         rows: list[tuple[FloatArray, FloatArray, FloatArray, float, float, float]] = []
         whys: list[str] = []
         last: list[float] = []  # a body still meeting at this time stays
-        where = {vid: i for i, vid in enumerate(o.ids)}
+        where = {o.ids[i]: i for i in np.flatnonzero(o.length >= LONG_VEHICLE).tolist()}
         for place in self.signals.long:
             i = where.get(place.id)
             if i is None or place.speed < MOVING:
