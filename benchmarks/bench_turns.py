@@ -60,7 +60,7 @@ def run_turn(net: object, builder: TurnBuilder, a: str, b: str) -> dict[str, obj
     t0 = time.perf_counter()
     try:
         p = plan(net, a, b, start_pos=turn.start_pos, start_xy=turn.start[:2],  # type: ignore[arg-type]
-                 start_heading=turn.start[2])
+                 start_heading=turn.start[2], end_pos=turn.end_pos)
         tr = p.trajectory
         verdict = "feasible" if tr.feasible else "infeasible"
         out = outside(turn, np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.heading))

@@ -61,6 +61,7 @@ class Turn:
     start: tuple[float, float, float]  #: x, y [m], heading [rad]
     start_pos: float  #: station [m] of the start on ``from_edge``
     goal: Any  #: the goal region (polygon)
+    end_pos: float  #: position [m] of the goal's far end along ``to_edge``
 
 
 def _sumo(path: Path) -> Any:
@@ -205,7 +206,7 @@ class TurnBuilder:
         window = area.intersection(unary_union([*core, spot]).buffer(SLACK))
         shapely.prepare(area)
         return Turn(from_edge, to_edge, junction.getID(), area, window, start, start_pos,
-                    goal)
+                    goal, g1 * b.getLength())
 
 
 #: Length [m] over which a lane's band reaches on into the junction at its end (see

@@ -475,7 +475,8 @@ def _add_plan(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "plan", help="plan levels 1-3 on a SUMO network and write the trajectory",
         description="Plan the route (level 1), the roadmaps (level 2) and the trajectory "
-                    "(level 3) from the start of FROM_EDGE to the end of TO_EDGE; write "
+                    "(level 3) from the start of FROM_EDGE to the end of TO_EDGE (or "
+                    "--end-pos on it); write "
                     "trajectory.csv and plan.json into --out, and a picture with --plot.")
     p.add_argument("net", metavar="NET", help="SUMO network (.net.xml or .net.xml.gz)")
     p.add_argument("from_edge", metavar="FROM_EDGE")
@@ -491,6 +492,9 @@ def _add_plan(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--avoid", nargs="+", default=[], metavar="EDGE", help="edges not to use")
     p.add_argument("--start-pos", type=_non_negative, default=0.0, metavar="M",
                    help="start position [m] along FROM_EDGE")
+    p.add_argument("--end-pos", type=_non_negative, default=None, metavar="M",
+                   help="position [m] along TO_EDGE where the plan ends, as SUMO's "
+                        "arrivalPos (default: its end)")
     p.add_argument("--s-max", type=_positive, default=None, metavar="M/S",
                    help="maximum speed [m/s]")
     p.add_argument("--d", type=_spacing, default=None, metavar="M",
@@ -524,7 +528,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     if args.s_max is not None:
         tp = replace(tp, s_max=args.s_max)
     result = plan(net, args.from_edge, args.to_edge, obstacles, start_pos=args.start_pos,
-                  vclass=args.vclass, weight=args.weight, avoid=args.avoid,
+                  end_pos=args.end_pos, vclass=args.vclass, weight=args.weight, avoid=args.avoid,
                   roadmap_params=rp, trajectory_params=tp)
     tr = result.trajectory
     _clear_outputs(out, _PLAN_OUTPUTS)

@@ -32,7 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from splineplan.corridor import Corridor
-from splineplan.errors import NoRouteError, RoadBlockedError
+from splineplan.errors import NoRouteError, ParameterError, RoadBlockedError
 from splineplan.network import CarShape, RoadNetwork, route_corridor
 from splineplan.obstacles import Obstacles
 from splineplan.planner import plan_corridor
@@ -87,6 +87,7 @@ def plan(
     start_heading: float | None = None,
     start_speed: float = 0.0,
     end_speed: float | None = 0.0,
+    end_pos: float | None = None,
     vclass: str = "passenger",
     weight: str = "length",
     avoid: Iterable[str] = (),
@@ -94,7 +95,8 @@ def plan(
     trajectory_params: TrajectoryParams | None = None,
     max_reroutes: int = 8,
 ) -> Plan:
-    """Plan from a start on ``from_edge`` to the end of ``to_edge`` among obstacles.
+    """Plan from a start on ``from_edge`` to the end of ``to_edge`` (or ``end_pos`` on it)
+    among obstacles.
 
     Parameters
     ----------
@@ -111,6 +113,10 @@ def plan(
         drivable area at ``start_pos``, along the road.
     start_speed, end_speed
         Speeds [m/s] at the start and at the goal (``None``: keep going).
+    end_pos
+        Position [m] along ``to_edge`` where the plan ends, as SUMO's ``arrivalPos``
+        (default: the edge's end). On a route of one edge it must lie ahead of
+        ``start_pos``.
     vclass, weight, avoid
         As for :func:`splineplan.route.shortest_route`.
     roadmap_params, trajectory_params
@@ -120,6 +126,8 @@ def plan(
 
     Raises
     ------
+    ParameterError
+        ``end_pos`` outside ``to_edge``, or not ahead of the start on a one-edge route.
     NoRouteError
         No road route from the origin to the destination.
     RoadBlockedError
@@ -132,6 +140,8 @@ def plan(
     rp = roadmap_params if roadmap_params is not None else RoadmapParams()
     tp = trajectory_params if trajectory_params is not None else TrajectoryParams()
     car = CarShape(rp.vehicle_length, rp.vehicle_width, tp.min_turn_radius)
+    if end_pos is not None:
+        _check_end_pos(network, from_edge, to_edge, start_pos, end_pos)
     avoided = list(avoid)
     blocked: list[str] = []
     t_route = t_roadmap = t_traj = 0.0
@@ -147,6 +157,8 @@ def plan(
             raise RoadBlockedError(f"{last}; no other route: {err}", station=last.station,
                                    edge=last.edge, junction=last.junction) from err
         corridor = route_corridor(network, route, vclass=vclass)
+        if end_pos is not None:
+            corridor = corridor.slice(0.0, end_station(network, corridor, end_pos))
         back = {(route.edges[i], route.edges[i + 1]) for i in turnarounds(network, route)}
         t_route += time.perf_counter() - t0
         xy = (corridor.to_xy(start_pos, 0.0) if start_xy is None
@@ -171,6 +183,29 @@ def plan(
         return Plan(route, corridor, tuple(result.roadmaps), result.trajectory,
                     tuple(blocked), t_route, t_roadmap + result.roadmap_seconds,
                     t_traj + result.trajectory_seconds)
+
+
+def end_station(network: RoadNetwork, corridor: Corridor, end_pos: float) -> float:
+    """Station [m] on a route's corridor of position ``end_pos`` [m] along its last edge.
+
+    The last edge's stretch runs from its start station to the corridor's end; positions
+    along it scale with the edge's length (the corridor's reference line runs midway
+    across the lanes and may be a little longer or shorter than SUMO's lane length).
+    """
+    s0 = float(corridor.edge_starts[-1])
+    length = network.length_of(corridor.edges[-1])
+    return s0 + (corridor.length - s0) * min(max(end_pos / length, 0.0), 1.0)
+
+
+def _check_end_pos(network: RoadNetwork, from_edge: str, to_edge: str, start_pos: float,
+                   end_pos: float) -> None:
+    length = network.length_of(to_edge)
+    if not 0.0 <= end_pos <= length:
+        raise ParameterError(f"end_pos {end_pos:g} m is outside edge '{to_edge}' "
+                             f"[0, {length:g}] m")
+    if from_edge == to_edge and end_pos <= start_pos:
+        raise ParameterError(f"end_pos {end_pos:g} m is not ahead of start_pos "
+                             f"{start_pos:g} m on edge '{to_edge}'")
 
 
 def turnarounds(network: RoadNetwork, route: Route) -> tuple[int, ...]:

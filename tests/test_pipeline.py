@@ -47,6 +47,35 @@ def test_plan_follows_level_one_and_joins_continuously(grid) -> None:
         result.route_seconds + result.roadmap_seconds + result.trajectory_seconds)
 
 
+@pytest.mark.parametrize("end_pos", [12.0, 60.0, 125.0])
+def test_plan_ends_at_the_arrival_position_sumolib_places(grid, end_pos: float) -> None:
+    """``end_pos`` is SUMO's ``arrivalPos``: the plan stops there, on the last edge."""
+    whole = plan(grid, "A0B0", "B0B1")
+    result = plan(grid, "A0B0", "B0B1", end_pos=end_pos)
+    lane = sumolib.net.readNet(str(NETS / "grid.net.xml")).getEdge("B0B1").getLanes()[0]
+    goal = np.asarray(sumolib.geomhelper.positionAtShapeOffset(lane.getShape(), end_pos))
+    tr = result.trajectory
+    assert tr.feasible and tr.speed[-1] == pytest.approx(0.0, abs=1e-6)
+    # the centre stops across the lanes from that position: within half the road's width
+    # (two lanes of 3.2 m) of the lane's centre, and not before or beyond it
+    end = np.array([tr.x[-1], tr.y[-1]])
+    along = np.array([np.cos(tr.heading[-1]), np.sin(tr.heading[-1])])
+    assert abs(float((end - goal) @ along)) < 1.0
+    assert float(np.hypot(*(end - goal))) < 3.5
+    assert result.corridor.length < whole.corridor.length - (129.2 - end_pos) + 5.0
+    # the stretch before is the same road: the route and its first edge's corridor
+    assert result.route == whole.route
+
+
+def test_plan_refuses_an_arrival_position_off_the_edge_or_behind_the_start(grid) -> None:
+    from splineplan.errors import ParameterError
+
+    with pytest.raises(ParameterError, match="outside edge 'B0B1'"):
+        plan(grid, "A0B0", "B0B1", end_pos=1e4)
+    with pytest.raises(ParameterError, match="not ahead of start_pos"):
+        plan(grid, "A0B0", "A0B0", start_pos=100.0, end_pos=50.0)
+
+
 def test_plan_reroutes_around_a_road_closed_by_stopped_cars(grid) -> None:
     cars = read_obstacles(grid, SCENARIOS / "blocked_road.rou.xml")
     direct = shortest_route(grid, "A1B1", "C1D1")
