@@ -20,7 +20,9 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import NETS, ROOT
-from shapely.geometry import Polygon
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from shapely.geometry import LineString, Polygon
 
 from splineplan.errors import (
     ScenarioError,
@@ -602,14 +604,55 @@ def test_cli_simulate(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> Non
     assert "scenario file not found" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("phase", [0.0, 2.0, 4.0])
+@settings(max_examples=40, deadline=None)
+@given(st.floats(-12.0, 12.0), st.floats(-0.6, 0.6), st.floats(0.0, 40.0))
+def test_the_place_where_a_footprint_reaches_a_foes_lane_is_shapelys(
+        offset: float, turn: float, u: float) -> None:
+    """Where the ego's footprint, along a straight path, first comes within 0.15 m of a
+    car driving on a junction lane (the city's B0, westbound straight through), as the
+    give-way stop uses it: the same samples as shapely's distance from the footprints to
+    that lane's centre line, buffered by the car's half width (within 5 cm)."""
+    from types import SimpleNamespace
+
+    from splineplan.closedloop.control import PATH_MARGIN, Control
+
+    net = load_network(NETS / "city.net.xml")
+    lane = net.lane(":B0_1_0")
+    centre = LineString(lane.shape)
+    mid = np.asarray(centre.interpolate(0.5, normalized=True).coords[0])
+    # a path crossing the lane: northwards, shifted along it and turned
+    h = math.pi / 2.0 + turn
+    s = np.arange(0.0, 60.0, 0.5)
+    start = mid + np.array([offset, -30.0])
+    xy = start + np.column_stack((np.cos(h) * s, np.sin(h) * s))
+    ego = SimpleNamespace(length=4.5, width=1.8)
+    me = SimpleNamespace(net=net, sc=SimpleNamespace(ego=ego), traj=object(), u=u,
+                         full_s=s, full_xy=xy, full_heading=np.full(len(s), h),
+                         _reach_plan=None, _reach={})
+    me._touching = lambda *a: Control._touching(me, *a)  # type: ignore[attr-defined]
+    got = Control._lane_reach(me, ":B0_1_0", 1.8)  # type: ignore[arg-type]
+    dist = np.array([Polygon(footprint(p, h, 4.5, 1.8)).distance(centre) - 0.9 for p in xy])
+    ahead = s >= u
+    sure = np.flatnonzero(ahead & (dist <= PATH_MARGIN - 0.05))
+    maybe = np.flatnonzero(ahead & (dist <= PATH_MARGIN + 0.05))
+    if not len(maybe):
+        assert math.isinf(got)
+        return
+    assert s[maybe[0]] - u <= got + 1e-9
+    if len(sure):
+        assert got <= s[sure[0]] - u + 1e-9
+
+
+@pytest.mark.parametrize("phase", [0.0, 1.0, 2.0, 4.0])
 def test_a_left_turn_gives_way_to_the_stream_that_has_it(tmp_path: Path, phase: float
                                                           ) -> None:
     """The ego turns left at the city's priority junction B0 (A0B0 -> B0B1) across a
     westbound stream, a car every 6 s at 50 km/h, which has the way. Whatever the phase at
     which it comes, it gives way (SUMO's right of way, ``getJunctionFoes``) and crosses in a
     gap: no collision, and the margin kept to every car. Without it, one phase in two ended
-    in a crash in the middle of the junction."""
+    in a crash in the middle of the junction. At phase 1 s the ego creeps up to its stop
+    1 m before the conflict area; it must keep waiting there (it once went on into the
+    stream's way as soon as it was within that metre, and stood 0.28 m from a car)."""
     (tmp_path / "stream.rou.xml").write_text(
         '<routes>\n  <vType id="car" length="4.5" width="1.8" vClass="passenger" '
         'speedDev="0"/>\n  <flow id="west" type="car" from="C0B0" to="B0A0" begin="0" '

@@ -26,6 +26,7 @@ from splineplan.closedloop.cooperate import CROSSING
 from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.errors import SplineplanError
 from splineplan.geometry import FloatArray
+from splineplan.spacetime import box_gap
 from splineplan.sumo.world import LanePlace, Signals
 from splineplan.traffic import first_in_reach, probe_points, safe_speed
 
@@ -38,6 +39,9 @@ PATH_MARGIN = 0.15
 #: vehicle it must yield to; it stops this far [m] before the area to let that one pass.
 YIELD_GAP = 1.5
 YIELD_STOP = 1.0
+#: The ego counts as in a conflict area from this far [m] before it (SUMO's distances are
+#: to the area's first point, along the lanes).
+YIELD_EDGE = 0.2
 #: A vehicle in the path slower than this [m/s] stands in a queue: the ego keeps a junction
 #: clear rather than stand inside it behind that vehicle (``keep_clear``).
 QUEUE_SPEED = 1.0
@@ -270,11 +274,16 @@ class Control(Perception):
         the times it occupies that area (at its speed) and the times the ego would (along
         its plan, accelerating from its speed) are compared; where they come within
         :data:`YIELD_GAP` of each other, the ego stops :data:`YIELD_STOP` before the area,
-        if it still can at its braking limit. Once it cannot, it goes on: a car that stops
-        inside a crossing blocks it. A foe standing still outside the area is waiting
-        (for a light or another vehicle) and is no conflict.
+        if it still can at its braking limit (:meth:`_stop_short`): before SUMO's conflict
+        area, and before its footprint reaches the foe's body driving along its lane
+        (:meth:`_lane_reach`; SUMO measures along the lanes' centre lines, and a turning
+        car's front corner is in the foe's way earlier). Once it cannot stop before them,
+        it goes on: a car that stops inside a crossing blocks it. One that has crept within
+        :data:`YIELD_STOP` of the area stays there while it must give way: it is in the
+        area only within :data:`YIELD_EDGE` of it. A foe standing still outside the area
+        is waiting (for a light or another vehicle) and is no conflict.
         """
-        tp, ego = self.sc.trajectory, self.sc.ego
+        ego = self.sc.ego
         foes = self.signals.foes
         if foes is None:  # an older SUMO, or the ego not on its route: SUMO's view only
             return math.inf
@@ -282,8 +291,8 @@ class Control(Perception):
         for foe in foes:
             ego_in, foe_in, ego_out, foe_out, must_yield = (
                 foe.ego_in, foe.foe_in, foe.ego_out, foe.foe_out, foe.must_yield)
-            if not must_yield or ego_in <= YIELD_STOP:
-                continue  # the ego has the way, or is at (or in) the area already
+            if not must_yield or ego_in <= YIELD_EDGE:
+                continue  # the ego has the way, or is in the area already
             v_f = foe.foe_speed
             foe_out += foe.foe_length
             if foe_out <= 0.0 or (foe_in > 0.0 and v_f < STOPPED_FOE_SPEED):
@@ -294,16 +303,62 @@ class Control(Perception):
             t_out = self._time_along_plan(ego_out + ego.length)
             if t_in - YIELD_GAP >= t_foe_out or t_foe_in >= t_out + YIELD_GAP:
                 continue
-            room = ego_in - YIELD_STOP
-            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * tp.b_max * room:
-                continue  # cannot stop before the area, even braking hard: clear it
-            # a comfortable stop, one step early
-            c = math.sqrt(max(2.0 * tp.b_max * (room - self.v * self.dt), 0.0))
+            c = self._stop_short(min(ego_in, self._lane_reach(foe.foe_lane, foe.foe_width)))
             if c < cap:
                 cap = c
                 self.why_slow = (f"giving way at a junction to vehicle '{foe.id}', as "
                                  "SUMO's right of way says")
         return cap
+
+    def _lane_reach(self, lane_id: str, width: float) -> float:
+        """How far [m] the ego can go along its path before its footprint comes within
+        :data:`PATH_MARGIN` of a vehicle ``width`` [m] wide anywhere on the centre line of
+        SUMO's lane ``lane_id`` (a foe's lane through a junction), ``inf`` where it does
+        not on its path ahead (or the width is unknown). Found once per plan, lane and
+        width, for every path sample (:func:`~splineplan.spacetime.box_gap` of the
+        footprint and each piece of that band)."""
+        if not lane_id or width <= 0.0:
+            return math.inf
+        if self._reach_plan is not self.traj:
+            self._reach_plan, self._reach = self.traj, {}
+        stations = self._reach.get((lane_id, width))
+        if stations is None:
+            stations = self._touching(lane_id, width)
+            self._reach[(lane_id, width)] = stations
+        k = bisect.bisect_left(stations, self.u)
+        return stations[k] - self.u if k < len(stations) else math.inf
+
+    def _touching(self, lane_id: str, width: float) -> list[float]:
+        """Stations [m] of the path samples whose footprint comes within
+        :data:`PATH_MARGIN` of the band ``width`` [m] wide along lane ``lane_id`` (none
+        for a lane the network lacks)."""
+        try:
+            lane = self.net.lane(lane_id)
+        except SplineplanError:
+            return []
+        pts = np.asarray(lane.shape, dtype=float)
+        d = np.diff(pts, axis=0)
+        seg = np.hypot(d[:, 0], d[:, 1])
+        keep = seg > 1e-6
+        if not keep.any():
+            return []
+        mid, d, seg = ((pts[:-1] + pts[1:]) / 2.0)[keep], d[keep], seg[keep]
+        ego = self.sc.ego
+        # only the samples near the lane's bounding box can come near it
+        reach = 0.5 * math.hypot(ego.length, ego.width) + 0.6 * width + PATH_MARGIN
+        xy = self.full_xy
+        close = np.flatnonzero(np.all(xy >= pts.min(axis=0) - reach, axis=1)
+                               & np.all(xy <= pts.max(axis=0) + reach, axis=1))
+        n, m = len(close), len(seg)
+        if not n:
+            return []
+        i = np.repeat(close, m)
+        j = np.tile(np.arange(m), n)
+        gap = box_gap(xy[i], self.full_heading[i], (ego.length, ego.width),
+                      mid[j], np.arctan2(d[:, 1], d[:, 0])[j],
+                      (seg[j] + 0.1 * width, np.full(len(j), width)))
+        near = (gap.reshape(n, m) <= PATH_MARGIN).any(axis=1)
+        return self.full_s[close[near]].tolist()
 
     def _body_speed(self, cap: float) -> float:
         """Speed cap [m/s] that keeps the ego's footprint, swinging round its path's

@@ -31,7 +31,7 @@ import numpy as np
 
 from splineplan._signals import sigint_deferred, sigint_ignored
 from splineplan.closedloop.bodies import LONG_VEHICLE
-from splineplan.closedloop.control import EMERGENCY_FACTOR, YIELD_STOP
+from splineplan.closedloop.control import EMERGENCY_FACTOR, YIELD_EDGE
 from splineplan.closedloop.cooperate import Published
 from splineplan.closedloop.driver import DRIVERS, Driver, DriverKind
 from splineplan.closedloop.record import (
@@ -372,7 +372,7 @@ class _Run:
             o = d.others
             long = (tuple(o.ids[i] for i in np.flatnonzero(o.length >= LONG_VEHICLE).tolist())
                     if o.n else ())
-            mv = d.command(self.world.signals(d.ego, d.sc.sim.lookahead, near=YIELD_STOP,
+            mv = d.command(self.world.signals(d.ego, d.sc.sim.lookahead, near=YIELD_EDGE,
                                               long=long))
             try:
                 self.world.move(d.ego, mv.edge, mv.lane, mv.centre, mv.heading,

@@ -91,6 +91,8 @@ class JunctionFoe:
     must_yield: bool
     foe_speed: float
     foe_length: float
+    foe_lane: str = ""  #: the foe's lane where the two meet (SUMO's ``foeLane``)
+    foe_width: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -339,11 +341,15 @@ class World:
                 continue  # the vehicle has the way, or is at (or in) the area already
             try:
                 v_f = s.vehicle.getSpeed(f[0])
-                len_f = s.vehicle.getLength(f[0])
+                size = self._sizes.get(f[0])
+                if size is None:
+                    size = (float(s.vehicle.getLength(f[0])), float(s.vehicle.getWidth(f[0])))
+                    self._sizes[f[0]] = size
             except Exception:
                 continue
             assert foes is not None
-            foes.append(JunctionFoe(f[0], f[1], f[2], f[3], f[4], bool(f[7]), v_f, len_f))
+            foes.append(JunctionFoe(f[0], f[1], f[2], f[3], f[4], bool(f[7]), v_f, size[0],
+                                    str(f[6]), size[1]))
         self.seconds += time.perf_counter() - t0
         return Signals(lights, None if foes is None else tuple(foes),
                        self.places(long) if long else ())
