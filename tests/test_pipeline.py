@@ -63,7 +63,7 @@ def test_plan_ends_at_the_arrival_position_sumolib_places(grid, end_pos: float) 
     assert abs(float((end - goal) @ along)) < 1.0
     assert float(np.hypot(*(end - goal))) < 3.5
     assert result.corridor.length < whole.corridor.length - (129.2 - end_pos) + 5.0
-    # the stretch before is the same road: the route and its first edge's corridor
+    # the same route, only shorter
     assert result.route == whole.route
 
 
