@@ -626,9 +626,8 @@ def test_the_place_where_a_footprint_reaches_a_foes_lane_is_shapelys(
     start = mid + np.array([offset, -30.0])
     xy = start + np.column_stack((np.cos(h) * s, np.sin(h) * s))
     ego = SimpleNamespace(length=4.5, width=1.8)
-    me = SimpleNamespace(net=net, sc=SimpleNamespace(ego=ego), traj=object(), u=u,
-                         full_s=s, full_xy=xy, full_heading=np.full(len(s), h),
-                         _reach_plan=None, _reach={})
+    me = SimpleNamespace(net=net, sc=SimpleNamespace(ego=ego), u=u, full_s=s, full_xy=xy,
+                         full_heading=np.full(len(s), h), _reach={})
     me._touching = lambda *a: Control._touching(me, *a)  # type: ignore[attr-defined]
     got = Control._lane_reach(me, ":B0_1_0", 1.8)  # type: ignore[arg-type]
     dist = np.array([Polygon(footprint(p, h, 4.5, 1.8)).distance(centre) - 0.9 for p in xy])

@@ -112,7 +112,6 @@ class DriverState:
     _cand_at: tuple[float, float] | None
     _cand_was: list[int]
     _turn_key: tuple[Corridor, float] | None
-    _reach_plan: Any
     _reach: dict[tuple[str, float], list[float]]
     _turn_window: FloatArray
 

@@ -319,8 +319,6 @@ class Control(Perception):
         footprint and each piece of that band)."""
         if not lane_id or width <= 0.0:
             return math.inf
-        if self._reach_plan is not self.traj:
-            self._reach_plan, self._reach = self.traj, {}
         stations = self._reach.get((lane_id, width))
         if stations is None:
             stations = self._touching(lane_id, width)

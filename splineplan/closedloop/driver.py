@@ -135,7 +135,6 @@ class Driver(Replanning, Control):
         self._ahead_box: tuple[list[float], ...] = ([], [], [], [])
         self._sample_step = 0.0
         self._cand_was: list[int] = []
-        self._reach_plan: Any = None  # the plan whose lane reaches are in _reach
         self._reach: dict[tuple[str, float], list[float]] = {}  # see Control._lane_reach
         self._turn_key: tuple[Corridor, float] | None = None
         self._turn_window: FloatArray = np.zeros(0)

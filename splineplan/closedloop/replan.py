@@ -502,6 +502,7 @@ class Replanning(Perception):
         # plain lists for the per-step interpolation along the path
         self._pl_np = (u, self.path_speed**2)
         self._times_key = None
+        self._reach = {}  # the lane reaches of the new path (Control._lane_reach)
         self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
                     self.path_heading.tolist(), (self.path_speed**2).tolist())
         self._full = (self.full_s.tolist(), self.full_xy[:, 0].tolist(),
