@@ -1171,6 +1171,12 @@ def _bench_travel_time(rows: Sequence[Mapping[str, Any]], drivers: list[str],
     return ax
 
 
+#: Distance [m] from the driven path and the goal within which a CommonRoad figure frames
+#: static obstacles too, and the least margin [m] round what it frames.
+FRAME_REACH = 20.0
+FRAME_PAD = 8.0
+
+
 def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: Any, *,
                     route: Sequence[Any] = (), goal: Sequence[Any] = (),
                     moving: Sequence[Any] = (), body: tuple[float, float] = (4.5, 1.8),
@@ -1232,9 +1238,15 @@ def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: A
                                          label="car every 0.5 s"))
     fig.colorbar(plt.cm.ScalarMappable(norm=Normalize(0.0, top), cmap=SPEED_CMAP), ax=ax,
                  label="speed [m/s]", shrink=0.8)
-    pts = np.vstack([xy] + [np.asarray(p) for p in route] + [np.asarray(p) for p in goal])
+    # framed on what the car drives, the goal and the static obstacles near them (not the
+    # whole route, which may run on for hundreds of metres)
+    pts = np.vstack([xy] + [np.asarray(p) for p in goal])
+    box_lo, box_hi = pts.min(axis=0) - FRAME_REACH, pts.max(axis=0) + FRAME_REACH
+    near = [p for p in (obstacles.polygons() if len(obstacles) else [])
+            if np.any(np.all((p >= box_lo) & (p <= box_hi), axis=1))]
+    pts = np.vstack([pts, *near])
     lo, hi = pts.min(axis=0), pts.max(axis=0)
-    pad = max(10.0, 0.1 * float(np.max(hi - lo)))
+    pad = max(FRAME_PAD, 0.1 * float(np.max(hi - lo)))
     ax.set_xlim(lo[0] - pad, hi[0] + pad)
     ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.set_aspect("equal", adjustable="box")

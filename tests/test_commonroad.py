@@ -156,6 +156,32 @@ def test_the_command_writes_the_solution_and_the_picture(tmp_path: Path) -> None
     assert names == ["ZAM_Urban-3_1.png", "solution_KS2:SM1:ZAM_Urban-3_1:2018b.xml"]
 
 
+def test_the_picture_frames_what_the_car_drives() -> None:
+    """The figure of a plan is framed on the driven part, the goal and the static
+    obstacles near them, not on the whole route: on ZAM_Urban-2_1 the route runs 209 m and
+    the solution drives about 60 m of it, and each of those must be readable."""
+    from splineplan.plot import FRAME_PAD, FRAME_REACH, plot_commonroad
+
+    res = cr.plan(cr.read(DATA / "ZAM_Urban-2_1.xml"))
+    net = res.problem.scenario.lanelet_network
+    route = [cr.lanelet_outline(net.find_lanelet_by_id(i)) for i in res.route.lanelets]
+    drove = cr.driven(res)
+    fig = plot_commonroad(cr.lanelet_polygons(res.problem.scenario), res.obstacles, drove,
+                          route=route, goal=cr.goal_outlines(res.goal))
+    ax = fig.axes[0]
+    (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+    xy = np.column_stack((drove.x, drove.y))
+    assert x0 <= xy[:, 0].min() and xy[:, 0].max() <= x1
+    assert y0 <= xy[:, 1].min() and xy[:, 1].max() <= y1
+    lo, hi = xy.min(axis=0) - FRAME_REACH, xy.max(axis=0) + FRAME_REACH
+    for poly in res.obstacles.polygons():
+        if np.all((poly >= lo) & (poly <= hi)):
+            assert x0 <= poly[:, 0].min() and poly[:, 0].max() <= x1
+    route_span = np.ptp(np.vstack(route)[:, 0])
+    assert x1 - x0 < 0.6 * route_span
+    assert x1 - x0 >= np.ptp(xy[:, 0]) + 2 * FRAME_PAD - 1e-9
+
+
 def test_the_path_passes_through_a_goal_box_beside_its_lane() -> None:
     """A goal where a recorded car was is often a box narrower than a lane, or in the lane
     beside the path's: the car's centre must pass through it. On a straight three-lane road
