@@ -147,6 +147,12 @@ class World:
         #: length and width [m] of each vehicle seen around a planned one (they do not
         #: change; read once instead of with every context subscription result)
         self._sizes: dict[str, tuple[float, float]] = {}
+        #: the search radius [m] round each planned vehicle (:meth:`around`)
+        self._ranges: dict[str, float] = {}
+        #: every vehicle's subscribed position, angle, speed and stop state, read once a
+        #: step (:meth:`_snapshot`)
+        self._snap_at = math.nan
+        self._snap: tuple[dict[str, int], list[str], FloatArray] = ({}, [], np.zeros((0, 5)))
         #: the places read this step (:meth:`places`)
         self._places_at = math.nan
         self._places: dict[str, LanePlace] = {}
@@ -256,11 +262,10 @@ class World:
         ``limits``: its accel, decel, emergency decel [m/s²] (for a vehicle SUMO inserted
         with its own type)."""
         s, c = self.sumo, self.c
-        s.vehicle.subscribe(vid, [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_LANE_ID])
-        # (lengths and widths do not change: read once per vehicle, see :meth:`around`)
-        s.vehicle.subscribeContext(vid, c.CMD_GET_VEHICLE_VARIABLE, subscribe_range,
-                                   [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED,
-                                    c.VAR_STOPSTATE])
+        # its own lane too; the others round it come from every vehicle's subscription
+        # (:meth:`around`)
+        s.vehicle.subscribe(vid, [*self._every(), c.VAR_LANE_ID])
+        self._ranges[vid] = float(subscribe_range)
         if limits is not None:
             s.vehicle.setAccel(vid, limits[0])
             s.vehicle.setDecel(vid, limits[1])
@@ -271,10 +276,12 @@ class World:
 
     def release(self, vid: str) -> None:
         """Stop the subscriptions of a vehicle (it left, or is no longer planned)."""
+        self._ranges.pop(vid, None)
         with contextlib.suppress(Exception):
-            self.sumo.vehicle.unsubscribe(vid)
-        with contextlib.suppress(Exception):
-            self.sumo.vehicle.unsubscribeContext(vid, self.c.CMD_GET_VEHICLE_VARIABLE, 0.0)
+            if vid in self.sumo.vehicle.getIDList():  # still seen by the others
+                self.sumo.vehicle.subscribe(vid, self._every())
+            else:  # (a subscription to a vehicle that is gone fails the next step)
+                self.sumo.vehicle.unsubscribe(vid)
 
     def pose(self, vid: str) -> tuple[FloatArray, float]:
         """Front bumper ``(2,)`` [m] and heading [rad] of a vehicle, read now."""
@@ -296,16 +303,43 @@ class World:
         fx, fy = st[c.VAR_POSITION]
         return VehicleState((fx, fy), st[c.VAR_ANGLE], st[c.VAR_SPEED], st[c.VAR_LANE_ID])
 
-    def around(self, vid: str, stopped_speed: float) -> Others:
-        """The vehicles around ``vid`` (its context subscription, one call), as arrays."""
+    def _every(self) -> list[int]:
+        """The variables subscribed for every vehicle."""
         c = self.c
-        t0 = time.perf_counter()
-        res = self.sumo.vehicle.getContextSubscriptionResults(vid)
-        self.seconds += time.perf_counter() - t0
-        ids = [v for v in res or () if v != vid]
-        if not ids:
+        return [c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_STOPSTATE]
+
+    def _snapshot(self) -> tuple[dict[str, int], list[str], FloatArray]:
+        """Every vehicle's row index by id, the ids, and ``(n, 5)`` front bumper x, y [m],
+        SUMO angle [deg], speed [m/s] and stop state, from one call a step (one
+        subscription per vehicle instead of a context subscription per planned vehicle,
+        which SUMO and the binding would fill for each planned vehicle apart)."""
+        if self._snap_at != self.time:
+            c = self.c
+            t0 = time.perf_counter()
+            res = self.sumo.vehicle.getAllSubscriptionResults()
+            pos, ang, spd, stop = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_STOPSTATE
+            ids = [v for v, r in res.items() if stop in r]
+            rows = np.array([(*r[pos], r[ang], r[spd], r[stop])
+                             for r in map(res.__getitem__, ids)],
+                            dtype=float).reshape(len(ids), 5)
+            self._snap = ({v: i for i, v in enumerate(ids)}, ids, rows)
+            self._snap_at = self.time
+            self.seconds += time.perf_counter() - t0
+        return self._snap
+
+    def around(self, vid: str, stopped_speed: float) -> Others:
+        """The vehicles within the search radius of ``vid``'s front bumper (as SUMO's
+        context subscription finds them), as arrays."""
+        index, every, rows = self._snapshot()
+        me = index.get(vid)
+        if me is None or len(rows) < 2:
             return NO_OTHERS
-        pos, ang, spd, stop = c.VAR_POSITION, c.VAR_ANGLE, c.VAR_SPEED, c.VAR_STOPSTATE
+        d = rows[:, :2] - rows[me, :2]
+        near = np.flatnonzero((d[:, 0] ** 2 + d[:, 1] ** 2) <= self._ranges.get(vid, 0.0) ** 2)
+        near = near[near != me]
+        if not len(near):
+            return NO_OTHERS
+        ids = [every[j] for j in near]
         sizes = self._sizes
         missing = [v for v in ids if v not in sizes]
         if missing:
@@ -314,9 +348,9 @@ class World:
             for v in missing:
                 sizes[v] = (float(veh.getLength(v)), float(veh.getWidth(v)))
             self.seconds += time.perf_counter() - t1
-        a = np.array([(*v[pos], v[ang], *sizes[i], v[spd], v[stop])
-                      for i, v in zip(ids, map(res.__getitem__, ids), strict=True)],
-                     dtype=float)
+        size = np.array([sizes[v] for v in ids], dtype=float)
+        sel = rows[near]
+        a = np.column_stack((sel[:, :3], size, sel[:, 3:]))
         return Others(ids, a, stopped_speed)
 
     def signals(self, vid: str, lookahead: float, *, near: float = 0.0,
@@ -408,7 +442,9 @@ class World:
 
     def remove(self, vid: str) -> None:
         """Take a vehicle out of the simulation, with its subscriptions (never raises)."""
-        self.release(vid)
+        self._ranges.pop(vid, None)
+        with contextlib.suppress(Exception):
+            self.sumo.vehicle.unsubscribe(vid)
         with contextlib.suppress(Exception):
             self.sumo.vehicle.remove(vid)
 
@@ -466,12 +502,20 @@ class World:
         except Exception as err:
             raise SumoError(f"SUMO failed at t={self.time:.1f} s: {sumo_message(err)}") from err
         self.time = float(s.simulation.getTime())
+        departed = tuple(s.simulation.getDepartedIDList())
+        every = self._every()
+        if departed:
+            # (a subscription to a vehicle that is gone again fails the next step)
+            present = set(s.vehicle.getIDList())
+            for vid in departed:
+                if vid in present and vid not in self._ranges:
+                    s.vehicle.subscribe(vid, every)
         collisions = tuple({"time": self.time, "collider": c.collider, "victim": c.victim,
                             "type": c.type, "lane": c.lane, "pos": c.pos}
                            for c in s.simulation.getCollisions())
         events = StepEvents(self.time, collisions,
                             tuple(s.simulation.getStartingTeleportIDList()),
-                            tuple(s.simulation.getDepartedIDList()),
+                            departed,
                             tuple(s.simulation.getArrivedIDList()))
         self.seconds += time.perf_counter() - t0
         return events
