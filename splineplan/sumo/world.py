@@ -2,7 +2,7 @@
 for ``sumo-gui``).
 
 :class:`World` starts SUMO, steps it, reads each planned vehicle and the vehicles around it
-once a step (a subscription and a context subscription per planned vehicle; no per-vehicle
+once a step (one subscription per vehicle, all read in one call; no per-vehicle
 getters), moves planned vehicles (``moveToXY`` at the front bumper, ``keepRoute=3``, and
 ``setSpeed``), sets routes, reads traffic lights and junction foes, and closes. Every error
 SUMO raises reaches the caller as :class:`SumoError`.
@@ -145,7 +145,7 @@ class World:
         self.seconds = 0.0
         self.c: Any = None
         #: length and width [m] of each vehicle seen around a planned one (they do not
-        #: change; read once instead of with every context subscription result)
+        #: change: read once, not with every step's results)
         self._sizes: dict[str, tuple[float, float]] = {}
         #: the search radius [m] round each planned vehicle (:meth:`around`)
         self._ranges: dict[str, float] = {}
