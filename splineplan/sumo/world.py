@@ -275,7 +275,8 @@ class World:
             s.vehicle.setLaneChangeMode(vid, 0)
 
     def release(self, vid: str) -> None:
-        """Stop the subscriptions of a vehicle (it left, or is no longer planned)."""
+        """Stop following a vehicle as a planned one (it left, or is no longer planned): it
+        keeps the subscription every vehicle has while it stays in the simulation."""
         self._ranges.pop(vid, None)
         with contextlib.suppress(Exception):
             if vid in self.sumo.vehicle.getIDList():  # still seen by the others
