@@ -328,6 +328,14 @@ class World:
             self.seconds += time.perf_counter() - t0
         return self._snap
 
+    def _size(self, vid: str) -> tuple[float, float]:
+        """A vehicle's length and width [m], read from SUMO the first time only."""
+        size = self._sizes.get(vid)
+        if size is None:
+            veh = self.sumo.vehicle
+            size = self._sizes[vid] = (float(veh.getLength(vid)), float(veh.getWidth(vid)))
+        return size
+
     def around(self, vid: str, stopped_speed: float) -> Others:
         """The vehicles within the search radius of ``vid``'s front bumper (as SUMO's
         context subscription finds them), as arrays."""
@@ -341,15 +349,13 @@ class World:
         if not len(near):
             return NO_OTHERS
         ids = [every[j] for j in near]
-        sizes = self._sizes
-        missing = [v for v in ids if v not in sizes]
+        missing = [v for v in ids if v not in self._sizes]
         if missing:
             t1 = time.perf_counter()
-            veh = self.sumo.vehicle
             for v in missing:
-                sizes[v] = (float(veh.getLength(v)), float(veh.getWidth(v)))
+                self._size(v)
             self.seconds += time.perf_counter() - t1
-        size = np.array([sizes[v] for v in ids], dtype=float)
+        size = np.array([self._sizes[v] for v in ids], dtype=float)
         sel = rows[near]
         a = np.column_stack((sel[:, :3], size, sel[:, 3:]))
         return Others(ids, a, stopped_speed)
@@ -376,10 +382,7 @@ class World:
                 continue  # the vehicle has the way, or is at (or in) the area already
             try:
                 v_f = s.vehicle.getSpeed(f[0])
-                size = self._sizes.get(f[0])
-                if size is None:
-                    size = (float(s.vehicle.getLength(f[0])), float(s.vehicle.getWidth(f[0])))
-                    self._sizes[f[0]] = size
+                size = self._size(f[0])
             except Exception:
                 continue
             assert foes is not None
@@ -504,10 +507,10 @@ class World:
             raise SumoError(f"SUMO failed at t={self.time:.1f} s: {sumo_message(err)}") from err
         self.time = float(s.simulation.getTime())
         departed = tuple(s.simulation.getDepartedIDList())
-        every = self._every()
         if departed:
             # (a subscription to a vehicle that is gone again fails the next step)
             present = set(s.vehicle.getIDList())
+            every = self._every()
             for vid in departed:
                 if vid in present and vid not in self._ranges:
                     s.vehicle.subscribe(vid, every)
