@@ -48,3 +48,47 @@ def test_the_vehicles_around_are_sumos_context() -> None:
         assert compared > 1000 and found > 1000
     finally:
         world.close()
+
+
+def test_a_vehicle_released_while_teleported_is_seen_when_it_is_back() -> None:
+    """A car held behind a standing one jumps ahead by SUMO's teleport, past a road
+    closed to cars; released from control while it is away (as a planned vehicle
+    is when it fails), it is among the vehicles round another planned one once it is on
+    the road again."""
+    world = World()
+    world.start(["--net-file", str(NETS / "straight.net.xml"),
+                 "--step-length", "0.1", "--no-step-log", "true", "--seed", "1",
+                 "--time-to-teleport", "2"])
+    sumo = world.sumo
+    try:
+        sumo.route.add("r", ["e0", "e1", "e2"])
+        sumo.route.add("e2", ["e2"])
+        for vid, route, lane, pos in (("stuck", "r", 0, 60.0), ("watch", "e2", 2, 150.0)):
+            sumo.vehicle.add(vid, route, departLane=str(lane), departPos=f"{pos:g}")
+            sumo.vehicle.setStop(vid, sumo.route.getEdges(route)[0], pos=pos + 5.0,
+                                 laneIndex=lane, duration=1000.0)
+        sumo.vehicle.add("held", "r", departLane="0", departPos="20")
+        for lane in range(3):  # no car may enter e1: the teleport passes it
+            sumo.lane.setDisallowed(f"e1_{lane}", ["passenger"])
+        away = back = False
+        seen_back = []
+        for _ in range(600):
+            events = world.step()
+            for vid in events.departed:
+                if vid in ("held", "watch"):
+                    world.take_control(vid, subscribe_range=1000.0, remote=False)
+                if vid == "held":
+                    sumo.vehicle.setLaneChangeMode(vid, 0)  # it stays behind "stuck"
+            if "held" in events.teleported:
+                away = True
+                assert not world.present("held")
+                world.release("held")
+            if away and world.present("held"):
+                back = True
+                seen_back.append("held" in world.around("watch", 0.1).ids)
+            if back and len(seen_back) >= 5:
+                break
+        assert away and back
+        assert all(seen_back), seen_back
+    finally:
+        world.close()

@@ -507,11 +507,14 @@ class World:
             raise SumoError(f"SUMO failed at t={self.time:.1f} s: {sumo_message(err)}") from err
         self.time = float(s.simulation.getTime())
         departed = tuple(s.simulation.getDepartedIDList())
-        if departed:
+        # on the road again after a teleport: subscribed again (one no longer planned may
+        # have been released while away)
+        back = (*departed, *s.simulation.getEndingTeleportIDList())
+        if back:
             # (a subscription to a vehicle that is gone again fails the next step)
             present = set(s.vehicle.getIDList())
             every = self._every()
-            for vid in departed:
+            for vid in back:
                 if vid in present and vid not in self._ranges:
                     s.vehicle.subscribe(vid, every)
         collisions = tuple({"time": self.time, "collider": c.collider, "victim": c.victim,
