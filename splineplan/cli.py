@@ -670,6 +670,7 @@ def _cmd_commonroad(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from splineplan.closedloop.pairs import TET_THRESHOLD
     from splineplan.errors import Interrupted, ParameterError
     from splineplan.sweep import build_sweep, run_sweep, summarise
 
@@ -684,11 +685,12 @@ def _sweep(args: argparse.Namespace) -> int:
         return 130
     for s in summarise(res.rows):
         tt = s["mean_travel_time"]
-        ttc = s["min_ttc"]
+        tet = s["tet"]
         print(f"share {100 * s['share']:5.1f} %: {s['runs']} runs ({s['failed']} failed), "
               f"planned {s['planned_arrived']}/{s['planned']} arrived, {s['collisions']} "
               f"collisions, mean travel time {'-' if tt is None else f'{tt:.1f} s'}, "
-              f"smallest TTC {'-' if ttc is None else f'{ttc:.2f} s'}")
+              f"time with TTC < {TET_THRESHOLD:g} s "
+              f"{'-' if tet is None else f'{tet:.0f} s'} per vehicle-hour")
     for r in res.rows:
         if r["error"]:
             print(f"failed: {r['name']}: {r['error']}")

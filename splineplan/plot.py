@@ -1262,9 +1262,9 @@ def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: A
 
 def plot_sweep(rows: Sequence[Mapping[str, Any]], path: str | PathLike[str]) -> Path:
     """Figure of a penetration sweep (rows of ``sweep.csv``, :mod:`splineplan.sweep`): mean
-    travel time, time loss, throughput and smallest time-to-collision against the share of
-    planned vehicles, each seed a dot and the mean over seeds a line with its standard
-    deviation as a band. Returns the file written."""
+    travel time, time loss, throughput and time exposed to a low time-to-collision against
+    the share of planned vehicles, each seed a dot and the mean over seeds a line with its
+    standard deviation as a band. Returns the file written."""
     from splineplan.sweep import FIGURES
 
     fig = Figure(figsize=(10.0, 6.5), layout="constrained")

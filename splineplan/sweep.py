@@ -6,7 +6,8 @@ at each share of planned vehicles (default 0, 10, 25, 50 and 100 % of the depart
 passenger cars, a seeded draw) over several seeds, one SUMO per process
 (:mod:`splineplan.executor`: local processes or a Ray cluster), and compares, per share,
 the travel time, time loss and throughput of every vehicle from SUMO's tripinfo output, and
-the smallest time-to-collision and gap between any two vehicles from the FCD output.
+from the FCD output the time exposed to a low time-to-collision (per vehicle-hour) and the
+smallest time-to-collision and gap between any two vehicles.
 
 Outputs in the sweep's folder: ``sweep.csv`` and ``sweep.json`` (one row per run),
 ``sweep.md`` (means and spreads per share) and ``sweep.png`` (the figures against the
@@ -28,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from splineplan._signals import sigint_ignored
+from splineplan.closedloop.pairs import TET_THRESHOLD
 from splineplan.errors import Interrupted, ParameterError
 from splineplan.executor import run_tasks
 
@@ -37,15 +39,16 @@ SHARES = (0.0, 0.1, 0.25, 0.5, 1.0)
 COLUMNS = ("index", "name", "share", "seed", "status", "reason", "error", "planned",
            "planned_arrived", "collisions", "time_off_road", "teleports", "vehicles",
            "arrived", "mean_travel_time", "mean_time_loss", "mean_travel_time_planned",
-           "mean_travel_time_others", "throughput", "min_ttc", "sumo_ssm_min_ttc", "min_gap",
-           "min_gap_planned", "sim_time", "wall_time", "run_dir")
+           "mean_travel_time_others", "throughput", "tet", "tet_planned", "min_ttc",
+           "sumo_ssm_min_ttc", "min_gap", "min_gap_planned", "sim_time", "wall_time",
+           "run_dir")
 #: Columns that are wall-clock times (they differ between runs of the same point).
 TIMING_FIELDS = ("wall_time", "process_wall_time")
 #: What the summary and the figure compare between shares.
 FIGURES = (("mean_travel_time", "mean travel time [s]"),
            ("mean_time_loss", "mean time loss [s]"),
            ("throughput", "throughput [veh/h]"),
-           ("min_ttc", "smallest time-to-collision [s]"))
+           ("tet", f"time with TTC < {TET_THRESHOLD:g} s [s per vehicle-hour]"))
 
 
 @dataclass(frozen=True)
@@ -188,6 +191,8 @@ def _row_metrics(summary: Mapping[str, Any], run_dir: Path) -> dict[str, Any]:
                                          if t["arrived"] and t["id"] not in planned]),
         "throughput": (3600.0 * sum(1 for t in trips if t["arrived"]) / sim_time
                        if sim_time > 0 else None),
+        "tet": pairs.get("tet_per_vehicle_hour"),
+        "tet_planned": pairs.get("tet_planned_per_vehicle_hour"),
         "min_ttc": pair_value("min_ttc"),
         "sumo_ssm_min_ttc": pair_value("sumo_ssm_min_ttc"),  # SUMO's SSM device's, beside
         "min_gap": pair_value("min_gap"),
@@ -285,15 +290,17 @@ def summary_markdown(result: SweepResult) -> str:
              + " | ".join(label for _, label in FIGURES) + " |",
              "|---:|---:|---:|---:|---:|" + "---:|" * len(FIGURES)]
     for s in summarise(result.rows):
-        cells = [f"{_fmt(s[k], 2 if k == 'min_ttc' else 1)} ± {_fmt(s[k + '_sd'], 1)}"
+        cells = [f"{_fmt(s[k])} ± {_fmt(s[k + '_sd'])}"
                  for k, _ in FIGURES]
         lines.append(f"| {100 * s['share']:.0f} % | {s['runs']} | {s['failed']} | "
                      f"{s['planned']} ({s['planned_arrived']}) | {s['collisions']} | "
                      + " | ".join(cells) + " |")
     lines += ["", "Means over seeds ± their standard deviation; travel time and time loss "
               "of every vehicle that arrived (SUMO's tripinfo); throughput: arrivals per "
-              "hour of simulated time; time-to-collision: the smallest between any two "
-              "vehicles (FCD output)."]
+              f"hour of simulated time; time with TTC < {TET_THRESHOLD:g} s: the seconds that "
+              f"pairs of vehicles spend less than {TET_THRESHOLD:g} s from touching at their "
+              "speeds and headings, "
+              "per hour that vehicles spend in the run (time exposed TTC, FCD output)."]
     return "\n".join(lines) + "\n"
 
 

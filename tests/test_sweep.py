@@ -54,6 +54,9 @@ def test_a_sweep_runs_each_share_and_compares_the_traffic(
     assert none["mean_travel_time"] > 0 and every["mean_travel_time"] > 0
     assert every["mean_travel_time_planned"] == pytest.approx(every["mean_travel_time"])
     assert none["throughput"] == pytest.approx(3600.0 * CARS / none["sim_time"])
+    # time exposed to a low TTC: none with a planned vehicle where none is planned
+    assert none["tet_planned"] == 0.0 and none["tet"] >= 0.0
+    assert every["tet_planned"] == pytest.approx(every["tet"])
     for name in ("sweep.csv", "sweep.json", "sweep.md", "sweep.png"):
         assert (out / name).is_file()
     with (out / "sweep.csv").open() as fh:

@@ -27,6 +27,8 @@ TTC_STEP = 0.1
 #: Pairs whose centres are farther apart than this [m] plus the largest diagonal are not
 #: measured (at city speeds, their time-to-collision is above a second or two).
 REACH = 30.0
+#: Time-to-collision [s] below which a pair counts as exposed (the time exposed TTC).
+TET_THRESHOLD = 1.5
 
 
 def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
@@ -34,7 +36,9 @@ def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
     """Smallest gap [m] and time-to-collision [s] between any two vehicles of ``fcd``
     (with the time and the pair), over all pairs, over those with a ``planned`` vehicle and
     (the gap) over those of two planned vehicles, and the pairs with a planned vehicle whose
-    footprints overlapped (first time).
+    footprints overlapped (first time), and the time exposed to a time-to-collision below
+    :data:`TET_THRESHOLD` (pair-seconds per vehicle-hour; all pairs and those with a
+    planned vehicle).
 
     ``sizes``: (length, width) [m] of each vehicle type; a type missing is taken as
     4.5 x 1.8 m.
@@ -43,8 +47,12 @@ def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
     best = {"gap": _Min(), "gap_planned": _Min(), "gap_both": _Min(), "ttc": _Min(),
             "ttc_planned": _Min()}
     overlaps: dict[tuple[str, str], float] = {}
+    times: list[float] = []
+    exposed = np.zeros(3)  # pair-steps exposed: all, with a planned vehicle; vehicle-steps
     for t, ids, front, head, speed, types in _steps(fcd):
         n = len(ids)
+        times.append(t)
+        exposed[2] += n
         if n < 2:
             continue
         size = np.array([sizes.get(ty, (4.5, 1.8)) for ty in types], dtype=float)
@@ -64,6 +72,8 @@ def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
             best[key].update(gap[mask], t, ids, i[mask], j[mask])
         for key, mask in (("ttc", slice(None)), ("ttc_planned", with_plan)):
             best[key].update(ttc[mask], t, ids, i[mask], j[mask])
+        low = ttc < TET_THRESHOLD
+        exposed[:2] += (np.count_nonzero(low), np.count_nonzero(low & with_plan))
         for k in np.flatnonzero((gap <= 0.0) & with_plan):
             pair = tuple(sorted((ids[i[k]], ids[j[k]])))
             overlaps.setdefault((pair[0], pair[1]), t)
@@ -74,9 +84,22 @@ def pair_safety(fcd: Path, sizes: dict[str, tuple[float, float]],
         "min_ttc": best["ttc"].record(),
         "min_ttc_planned": best["ttc_planned"].record(),
         "ttc_horizon": TTC_HORIZON,
+        **_exposure(exposed, times),
         "collision_pairs_planned": [{"pair": list(p), "time": t}
                                     for p, t in sorted(overlaps.items(), key=lambda kv: kv[1])],
     }
+
+
+def _exposure(counts: np.ndarray, times: list[float]) -> dict[str, Any]:
+    """The time exposed to a low time-to-collision per vehicle-hour, from the pair-steps
+    exposed (all, with a planned vehicle) and the vehicle-steps ``counts`` over steps at
+    ``times`` [s] (``None`` where no vehicle was there)."""
+    steps = np.diff(np.asarray(times, dtype=float))
+    period = float(np.min(steps[steps > 0])) if (steps > 0).any() else 1.0
+    hours = counts[2] * period / 3600.0
+    per_hour = [float(c * period / hours) if hours > 0 else None for c in counts[:2]]
+    return {"tet_threshold": TET_THRESHOLD, "tet_per_vehicle_hour": per_hour[0],
+            "tet_planned_per_vehicle_hour": per_hour[1]}
 
 
 class _Min:
