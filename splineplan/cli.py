@@ -460,6 +460,11 @@ def _cmd_simulate(args: argparse.Namespace) -> int:
         print(f"  planned {m['planned']}, arrived {m['arrived']}, collisions "
               f"{m['collisions']}, off road {m['vehicles_off_road']} vehicle(s), "
               f"wall {m['wall_time']:.1f} s for {m['sim_time_end']:.1f} s simulated")
+        pairs = m.get("pairs") or {}
+        if "overlapping_pairs_unplanned" in pairs:
+            print(f"  pairs whose footprints overlapped: "
+                  f"{len(pairs['collision_pairs_planned'])} with a planned vehicle, "
+                  f"{pairs['overlapping_pairs_unplanned']} of SUMO's own vehicles")
         for vid, v in result.vehicles.items():
             if v.status == "failed":
                 print(f"  {vid}: failed: {v.reason}")

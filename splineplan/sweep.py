@@ -37,7 +37,8 @@ from splineplan.executor import run_tasks
 SHARES = (0.0, 0.1, 0.25, 0.5, 1.0)
 #: Columns of ``sweep.csv``, in order.
 COLUMNS = ("index", "name", "share", "seed", "status", "reason", "error", "planned",
-           "planned_arrived", "collisions", "time_off_road", "teleports", "vehicles",
+           "planned_arrived", "collisions", "overlaps_planned", "overlaps_unplanned",
+           "time_off_road", "teleports", "vehicles",
            "arrived", "mean_travel_time", "mean_time_loss", "mean_travel_time_planned",
            "mean_travel_time_others", "throughput", "tet", "tet_planned", "min_ttc",
            "sumo_ssm_min_ttc", "min_gap", "min_gap_planned", "sim_time", "wall_time",
@@ -179,6 +180,10 @@ def _row_metrics(summary: Mapping[str, Any], run_dir: Path) -> dict[str, Any]:
         "planned": int(summary.get("planned") or 0),
         "planned_arrived": int(summary.get("arrived") or 0),
         "collisions": int(summary.get("collisions") or 0),
+        # pairs whose footprints overlapped (FCD): with a planned vehicle, and of two of
+        # SUMO's own (a baseline: SUMO's drivers overlap too)
+        "overlaps_planned": len(pairs.get("collision_pairs_planned") or ()),
+        "overlaps_unplanned": pairs.get("overlapping_pairs_unplanned"),
         "time_off_road": float(summary.get("time_off_road") or 0.0),
         "teleports": int(summary.get("teleports") or 0),
         "vehicles": len(trips),
@@ -265,7 +270,9 @@ def summarise(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             "failed": sum(1 for r in rs if r["status"] == "failed"),
             "planned": sum(int(r["planned"] or 0) for r in rs),
             "planned_arrived": sum(int(r["planned_arrived"] or 0) for r in rs),
-            "collisions": sum(int(r["collisions"] or 0) for r in rs)}
+            "collisions": sum(int(r["collisions"] or 0) for r in rs),
+            "overlaps_planned": sum(int(r.get("overlaps_planned") or 0) for r in rs),
+            "overlaps_unplanned": sum(int(r.get("overlaps_unplanned") or 0) for r in rs)}
         for key, _ in FIGURES:
             vals = [float(r[key]) for r in rs if r.get(key) is not None]
             entry[key] = statistics.fmean(vals) if vals else None
@@ -286,16 +293,20 @@ def summary_markdown(result: SweepResult) -> str:
     lines = [f"# Penetration sweep: {scenario}", "",
              f"{len(result.rows)} of {len(result.points)} runs, {result.executor}, "
              f"{result.wall_time:.0f} s" + (" (interrupted)" if result.interrupted else ""),
-             "", "| share | runs | failed | planned (arrived) | collisions | "
-             + " | ".join(label for _, label in FIGURES) + " |",
-             "|---:|---:|---:|---:|---:|" + "---:|" * len(FIGURES)]
+             "", "| share | runs | failed | planned (arrived) | collisions | overlapping "
+             "pairs: planned / SUMO's | " + " | ".join(label for _, label in FIGURES) + " |",
+             "|---:|---:|---:|---:|---:|---:|" + "---:|" * len(FIGURES)]
     for s in summarise(result.rows):
         cells = [f"{_fmt(s[k])} ± {_fmt(s[k + '_sd'])}"
                  for k, _ in FIGURES]
         lines.append(f"| {100 * s['share']:.0f} % | {s['runs']} | {s['failed']} | "
                      f"{s['planned']} ({s['planned_arrived']}) | {s['collisions']} | "
+                     f"{s['overlaps_planned']} / {s['overlaps_unplanned']} | "
                      + " | ".join(cells) + " |")
-    lines += ["", "Means over seeds ± their standard deviation; travel time and time loss "
+    lines += ["", "Collisions: by the planned vehicles' own footprint check; overlapping "
+              "pairs: pairs of vehicles whose footprints overlapped (FCD output), with a "
+              "planned vehicle and of two of SUMO's own. "
+              "Means over seeds ± their standard deviation; travel time and time loss "
               "of every vehicle that arrived (SUMO's tripinfo); throughput: arrivals per "
               f"hour of simulated time; time with TTC < {TET_THRESHOLD:g} s: the seconds that "
               f"pairs of vehicles spend less than {TET_THRESHOLD:g} s from touching at their "

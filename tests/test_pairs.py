@@ -49,3 +49,22 @@ def test_time_exposed_to_a_low_ttc(tmp_path: Path, planned: list[str]) -> None:
     assert s["min_ttc"]["value"] == pytest.approx(
         (GAP0 - SPEED * (steps - 1) * STEP) / SPEED, abs=STEP)
     assert s["collision_pairs_planned"] == []
+
+
+@pytest.mark.parametrize("planned", [["f"], []])
+def test_overlapping_pairs_by_whether_one_is_planned(tmp_path: Path, planned: list[str]
+                                                     ) -> None:
+    """The follower drives on into the standing car: their footprints overlap from
+    t = GAP0 / SPEED on, counted among the pairs with a planned vehicle (with its first
+    time, to one step) or among those of two vehicles not planned."""
+    fcd = tmp_path / "fcd.xml"
+    _fcd(fcd, 30)
+    s = pair_safety(fcd, {"car": (LENGTH, 1.8)}, planned)
+    if planned:
+        (hit,) = s["collision_pairs_planned"]
+        assert hit["pair"] == ["f", "l"]
+        assert hit["time"] == pytest.approx(GAP0 / SPEED, abs=STEP + 1e-9)
+        assert s["overlapping_pairs_unplanned"] == 0
+    else:
+        assert s["collision_pairs_planned"] == []
+        assert s["overlapping_pairs_unplanned"] == 1
