@@ -119,6 +119,10 @@ class Connection:
         Vehicle classes the connection itself admits.
     direction
         SUMO's direction code: ``s`` straight, ``l``/``r`` left/right, ``t`` turnaround, ...
+    state
+        SUMO's link state without a traffic light: ``M`` major, ``m`` minor, ``=`` equal,
+        ``s`` stop sign, ``w`` all-way stop, ``o``/``O`` a light switched off (a light's
+        links carry its initial state).
     """
 
     from_edge: str
@@ -128,6 +132,7 @@ class Connection:
     via: tuple[str, ...]
     allowed: frozenset[str]
     direction: str
+    state: str = ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -272,6 +277,14 @@ class RoadNetwork:
                 for via in c.via:
                     self._vias.setdefault(via, c)
         return self._vias.get(internal_lane)
+
+    def stop_kind(self, from_edge: str, to_edge: str, vclass: str) -> str:
+        """Whether a vehicle of ``vclass`` must come to a full stop before it goes from
+        ``from_edge`` to ``to_edge``: ``"s"`` at a stop sign, ``"w"`` at an all-way stop
+        (SUMO's link states), ``""`` where it need not."""
+        states = {c.state for c in self.connections_between(from_edge, to_edge,
+                                                            vclass=vclass)}
+        return "w" if "w" in states else "s" if "s" in states else ""
 
     def connections_between(self, from_edge: str, to_edge: str, *,
                             vclass: str | None = None) -> tuple[Connection, ...]:
@@ -452,7 +465,7 @@ def _from_sumolib(path: Path, net: Any) -> RoadNetwork:
                     from_edge=e.getID(), to_edge=f.getID(),
                     from_lane=c.getFromLane().getIndex(), to_lane=c.getToLane().getIndex(),
                     via=tuple(chain), allowed=perms(c._allowed),
-                    direction=str(c.getDirection())))
+                    direction=str(c.getDirection()), state=str(c.getState() or "")))
     conns.sort(key=lambda c: (index[c.from_edge], index[c.to_edge], c.from_lane, c.to_lane))
     conn_from = np.array([index[c.from_edge] for c in conns], dtype=np.int64)
     conn_to = np.array([index[c.to_edge] for c in conns], dtype=np.int64)

@@ -92,12 +92,14 @@ def test_lane_entry_finds_where_the_footprint_reaches_over_the_line() -> None:
     lateral = np.linspace(4.8, 1.6, 33)  # from the left lane's centre to the right's
     right = np.zeros(33)
     square = np.full(33, 0.9)
-    k, lane = lane_entry(lateral, right, square, lane_width=3.2) or (-1, -1)
+    k, lane, end = lane_entry(lateral, right, square, lane_width=3.2) or (-1, -1, -1)
     assert lane == 0 and lateral[k] - 0.9 < 3.2 - 0.1 <= lateral[k - 1] - 0.9
+    # inside the right lane again where its left side is back over the line
+    assert k < end < 33 and lateral[end] + 0.9 <= 3.2 + 0.1 < lateral[end - 1] + 0.9
     turned = side_reach(np.full(33, -0.25), 2.25, 0.9)
     rect = rotate(box(-2.25, -0.9, 2.25, 0.9), -0.25, use_radians=True)
     assert np.isclose(turned[0], -rect.bounds[1]) and np.isclose(turned[0], rect.bounds[3])
-    k2, _ = lane_entry(lateral, right, turned, lane_width=3.2) or (-1, -1)
+    k2, _, _ = lane_entry(lateral, right, turned, lane_width=3.2) or (-1, -1, -1)
     assert 0 <= k2 < k
     assert lane_entry(np.full(5, 4.8), np.zeros(5), np.full(5, 0.9), lane_width=3.2) is None
 

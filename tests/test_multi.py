@@ -110,6 +110,28 @@ def test_planned_vehicle_yields_to_published_plan(tmp_path: Path) -> None:
     assert {row["lane"] for row in b_rows} >= {"B0B1_0", "B1B2_0"}
 
 
+def test_a_turn_waits_for_published_plans_before_the_junction(tmp_path: Path) -> None:
+    """A left turn ('b', planned last) across two oncoming planned vehicles ('c' and 'a'):
+    its plan waits for theirs where its path crosses them, inside the junction; it waits
+    before the junction instead, as SUMO's drivers do, and crosses after both."""
+    p = tmp_path / "three.toml"
+    egos = (("a", "B2B1", 50.0, "B1B0"), ("c", "B2B1", 75.0, "B1B0"),
+            ("b", "B0B1", 90.0, "B1A1"))
+    p.write_text(f'network = "{NETS / "grid.net.xml"}"\n' + "".join(
+        f'[[ego]]\nid = "{v}"\nstart_edge = "{e}"\nstart_pos = {pos}\ngoal_edge = "{g}"\n'
+        for v, e, pos, g in egos) + "[sim]\nduration = 60\nseed = 1\n")
+    sc = load_scenario(p)
+    r = simulate(sc, out_dir=tmp_path / "out", progress=False)
+    assert r.arrived, r.reason
+    b_rows = _rows(tmp_path / "out" / "b" / "trajectory.csv")
+    stood = [row for row in b_rows if row["speed"] < 0.1 and row["t"] > 1.0]
+    assert stood  # it waited
+    assert not any(str(row["lane"]).startswith(":") for row in stood)
+    assert any(str(row["why_slow"]).startswith("keeping the junction clear while it waits "
+                                               "for the published plan of") for row in stood)
+    assert r.metrics["pairs"]["min_gap_planned"]["value"] >= sc.roadmap.safety_margin - 1e-3
+
+
 def _small_cfg(tmp_path: Path, end: float = 60.0) -> Path:
     cfg = tmp_path / "city.sumocfg"
     cfg.write_text(f"""<configuration><input>
@@ -427,6 +449,63 @@ def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
     assert lanes[-1] == "A1B1_0" and float(d["speed"][-1]) < 0.1
     assert r.vehicles["p"].metrics["stuck"] == [] or all(
         "junction clear" in s["why"] for s in r.vehicles["p"].metrics["stuck"])
+
+
+def test_planned_vehicle_stops_at_an_all_way_stop(tmp_path: Path) -> None:
+    """At the city's all-way stop (D2), a planned car ('p') comes to a full stop with its
+    front near the stop line and stands there for a moment before it crosses, as SUMO's
+    own car beside it ('q') does; before, it drove through at speed."""
+    from splineplan.closedloop.control import STOP_LINE, STOP_REACH, STOP_WAIT
+
+    routes = """<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vehicle id="p" depart="0" departLane="1" departPos="20" departSpeed="max" type="car">
+  <route edges="E2D2 D2C2"/></vehicle>
+<vehicle id="q" depart="0" departLane="0" departPos="5" departSpeed="max" type="car">
+  <route edges="E2D2 D2C2"/></vehicle>
+</routes>"""
+    _, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 40.0)
+    assert r.vehicles["p"].status == "arrived"
+    end = sumolib.net.readNet(str(NETS / "city.net.xml")).getEdge("E2D2").getLength()
+    stood: dict[str, float] = {"p": 0.0, "q": 0.0}
+    crossed: dict[str, bool] = {}
+    for step in ET.parse(tmp_path / "out" / "fcd.xml").iter("timestep"):
+        for v in step.iter("vehicle"):
+            vid, lane = str(v.get("id")), str(v.get("lane"))
+            if lane.startswith(":D2"):
+                crossed[vid] = True
+            elif (lane.startswith("E2D2") and float(v.get("speed", 1.0)) < 0.1
+                  and end - float(v.get("pos", 0.0)) <= STOP_LINE + STOP_REACH):
+                assert not crossed.get(vid)
+                stood[vid] += 0.1  # the step length
+    assert crossed == {"p": True, "q": True}
+    # both come to a full stop at the line; p stands its waiting time there (SUMO's car
+    # a step or two)
+    assert stood["p"] >= STOP_WAIT - 0.05 and stood["q"] > 0.0, stood
+    why = {row["why_slow"] for row in _rows(tmp_path / "out" / "p" / "trajectory.csv")}
+    assert "stopping at a stop sign" in why
+
+
+@pytest.mark.parametrize("q_pos", [0.0, 60.0])
+def test_planned_vehicle_takes_its_turn_at_an_all_way_stop(tmp_path: Path, q_pos: float
+                                                            ) -> None:
+    """A planned car ('p') and SUMO's car ('q', from the north) reach the all-way stop
+    D2 at about the same time (q a little before or after p): SUMO's car does not see a
+    car SUMO does not drive, so p, once stopped, waits for q to cross; they keep the
+    margin (p driving through hit q at 60 m, and p going after its stop alone hit q at
+    0 m)."""
+    routes = f"""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vehicle id="p" depart="0" departLane="1" departPos="20" departSpeed="max" type="car">
+  <route edges="E2D2 D2C2"/></vehicle>
+<vehicle id="q" depart="0" departLane="0" departPos="{q_pos:g}" departSpeed="max"
+  type="car"><route edges="D3D2 D2D1"/></vehicle>
+</routes>"""
+    sc, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 40.0)
+    assert r.vehicles["p"].status == "arrived"
+    pairs = r.metrics["pairs"]
+    assert pairs["collision_pairs_planned"] == []
+    assert pairs["min_gap_planned"]["value"] >= sc.roadmap.safety_margin
 
 
 def test_plan_keeps_clear_of_others_plans() -> None:

@@ -81,6 +81,7 @@ class DriverState:
     own_plan: Any  # the same, kept after the run took it to the board
     go_at: float
     waiting_for: tuple[str, ...]
+    plan_wait: float | None  # station on the trajectory where its plan first stands
     board_seen: int  # the board's count of plans when this one last planned
     trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among
     why_slow: str
@@ -107,6 +108,9 @@ class DriverState:
     _ref_heading: FloatArray
     _edge_starts: list[float]
     _junction_spans: list[tuple[float, float]]
+    _stop_lines: list[tuple[float, str, str]]  # (route station [m], edge, kind) of each
+    stops_done: set[str]  # the edges at whose stop line the vehicle has stopped
+    stop_since: float | None  # since when [s] it stands at a stop line
     _beside_at: tuple[float, float] | None
     _beside_was: tuple[np.ndarray, FloatArray]
     _cand_at: tuple[float, float] | None

@@ -53,6 +53,19 @@ STOPPED_FOE_SPEED = 0.1
 CHANGE_GAP_TIME = 1.0
 CHANGE_MIN_GAP = 1.0
 CHANGE_LOOK = 60.0
+#: At a stop sign or an all-way stop the vehicle comes to a full stop with its front
+#: :data:`STOP_LINE` [m] before the line (at most :data:`STOP_REACH` more) and stands this
+#: long [s] (SUMO's ``jmStopSignWait`` at stop signs) before it goes, giving way as SUMO's
+#: right of way says.
+STOP_WAIT = 1.0
+STOP_LINE = 1.0
+STOP_REACH = 2.0
+#: Acceleration [m/s²] at which a foe at an all-way stop may speed up (SUMO's default for
+#: passenger cars).
+FOE_ACCEL = 2.6
+#: How far [m] beyond a junction's bounding circle a vehicle coming towards an all-way
+#: stop counts as coming.
+ALLWAY_REACH = 3.0
 #: The closed loop's emergency deceleration, a multiple of the planner's ``b_max``: the
 #: speed control brakes up to this hard when something comes into the ego's path (and SUMO's
 #: vehicle type of the ego has it as its ``emergencyDecel``).
@@ -200,9 +213,33 @@ class Control(Perception):
                     cap = clear
                     self.why_slow = (f"keeping the junction clear: vehicle "
                                      f"'{o.ids[gap_to]}' stands beyond it")
+        if stop_front is not None and gap_to >= 0:
+            # not across a lane line behind a queue: before the lane change instead
+            stand = stop_front - ego.length / 2.0 - self.u
+            before = self._before_change(stand)
+            if before < stand:
+                c = math.sqrt(max(2.0 * tp.b_max * (before - self.v * self.dt), 0.0))
+                if c < cap:
+                    cap = c
+                    self.why_slow = (f"waiting before its lane change: vehicle "
+                                     f"'{o.ids[gap_to]}' stands beyond it")
+        if self.keep_clear and self.waiting_for and self.plan_wait is not None:
+            # its plan waits for another's inside a junction: wait before it instead
+            clear = self._keep_clear_speed(self.plan_wait + ego.length / 2.0)
+            if clear < cap:
+                cap = clear
+                self.why_slow = ("keeping the junction clear while it waits for the "
+                                 "published plan of "
+                                 + ", ".join(f"'{v}'" for v in self.waiting_for))
         red, give = self._red_light_speed(), self._yield_speed()
         if red < cap:
             cap, self.why_slow = red, "stopping at a red light"
+        stop = self._stop_sign_speed()
+        if stop < cap:
+            cap, self.why_slow = stop, "stopping at a stop sign"
+        allway = self._allway_speed(cap)
+        if allway < cap:
+            cap = allway  # (why_slow set by _allway_speed)
         if give < cap:
             cap = give  # (why_slow set by _yield_speed)
         body = self._body_speed(cap)
@@ -216,7 +253,8 @@ class Control(Perception):
     def _keep_clear_speed(self, stop_front: float) -> float:
         """Speed cap [m/s] that keeps a junction clear, as SUMO's drivers do: where the
         vehicle would come to stand inside the next junction on its route (its front at
-        ``stop_front``, a station on its path, behind a vehicle that stands beyond), it
+        ``stop_front``, a station on its path, behind a vehicle that stands beyond, or
+        where its plan waits for another's), it
         stops :data:`YIELD_STOP` before the junction instead, if it still can at its
         emergency braking; once inside (by the route's stations or on SUMO's junction
         lanes), it goes on."""
@@ -262,8 +300,39 @@ class Control(Perception):
                 need = self.v * self.v / (2.0 * tp.b_max)
                 if state in "yY" and dist < need:
                     return math.inf  # cannot stop comfortably: go
-                return math.sqrt(max(2.0 * tp.b_max * (dist - 1.0), 0.0))
+                stand = self._before_change(dist - 1.0)
+                return math.sqrt(max(2.0 * tp.b_max * stand, 0.0))
             break
+        return math.inf
+
+    def _stop_sign_speed(self) -> float:
+        """Speed cap [m/s] that stops at the next stop sign or all-way stop on the route
+        (:meth:`~splineplan.network.RoadNetwork.must_stop`), as SUMO's drivers do: the
+        front :data:`STOP_LINE` before the line, standing there :data:`STOP_WAIT`; then
+        that stop is done. A vehicle that cannot stop before the line at its emergency
+        braking goes on."""
+        if not self._stop_lines or self.last_lane.startswith(":"):
+            return math.inf
+        ego, b = self.sc.ego, self.sc.trajectory.b_max
+        front = self.station + ego.length / 2.0
+        for line, edge, _ in self._stop_lines:
+            if edge in self.stops_done or line < front:
+                continue  # done, or passed
+            room = line - front - STOP_LINE
+            if room > self.sc.sim.lookahead:
+                break
+            if self.v < STOPPED_FOE_SPEED and room <= STOP_REACH:
+                if self.stop_since is None:
+                    self.stop_since = self.time
+                if self.time - self.stop_since >= STOP_WAIT - 1e-9:
+                    self.stops_done.add(edge)
+                    self.stop_since = None
+                    continue
+                return 0.0
+            self.stop_since = None
+            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * (line - front):
+                return math.inf  # cannot stop before it
+            return math.sqrt(max(2.0 * b * (room - self.v * self.dt), 0.0))
         return math.inf
 
     def _yield_speed(self) -> float:
@@ -281,12 +350,16 @@ class Control(Perception):
         it goes on: a car that stops inside a crossing blocks it. One that has crept within
         :data:`YIELD_STOP` of the area stays there while it must give way: it is in the
         area only within :data:`YIELD_EDGE` of it. A foe standing still outside the area
-        is waiting (for a light or another vehicle) and is no conflict.
+        is waiting (for a light or another vehicle) and is no conflict, except at an
+        all-way stop, where it goes once it has stopped (SUMO's drivers do not see a
+        vehicle that SUMO does not drive approach): there a foe may speed up from its speed
+        at :data:`FOE_ACCEL` to reach the area.
         """
         ego = self.sc.ego
         foes = self.signals.foes
         if foes is None:  # an older SUMO, or the ego not on its route: SUMO's view only
             return math.inf
+        allway = self._next_stop_kind() == "w"
         cap = math.inf
         for foe in foes:
             ego_in, foe_in, ego_out, foe_out, must_yield = (
@@ -295,9 +368,10 @@ class Control(Perception):
                 continue  # the ego has the way, or is in the area already
             v_f = foe.foe_speed
             foe_out += foe.foe_length
-            if foe_out <= 0.0 or (foe_in > 0.0 and v_f < STOPPED_FOE_SPEED):
+            if foe_out <= 0.0 or (foe_in > 0.0 and v_f < STOPPED_FOE_SPEED and not allway):
                 continue  # cleared, or waiting outside the area
-            t_foe_in = max(foe_in, 0.0) / max(v_f, 1e-3)
+            t_foe_in = (_reach_time(max(foe_in, 0.0), v_f, FOE_ACCEL) if allway
+                        else max(foe_in, 0.0) / max(v_f, 1e-3))
             t_foe_out = foe_out / max(v_f, 1e-3)
             t_in = self._time_along_plan(ego_in)
             t_out = self._time_along_plan(ego_out + ego.length)
@@ -309,6 +383,59 @@ class Control(Perception):
                 self.why_slow = (f"giving way at a junction to vehicle '{foe.id}', as "
                                  "SUMO's right of way says")
         return cap
+
+    def _allway_speed(self, cap: float) -> float:
+        """Speed cap [m/s] that gives way at an all-way stop once the vehicle has stopped
+        there: SUMO reports no junction foes at all-way stops, and its drivers, who go in
+        the order they stopped, do not see a vehicle SUMO does not drive approach. So the
+        vehicle waits before the line while any vehicle SUMO drives is in the junction or
+        comes towards it within :data:`ALLWAY_REACH` [m] of its outline's bounding circle,
+        heading more than :data:`~.cooperate.CROSSING` away from the vehicle's heading
+        (other planned vehicles: by their published plans). Only caps below ``cap``."""
+        if not self._stop_lines or self.last_lane.startswith(":") or cap <= 0.0:
+            return math.inf
+        front = self.station + self.sc.ego.length / 2.0
+        line, edge, kind = next(((a, e, k) for a, e, k in self._stop_lines if a >= front),
+                                (math.inf, "", ""))
+        if kind != "w" or edge not in self.stops_done:
+            return math.inf  # no all-way stop next, or not stopped at it yet
+        o = self.others
+        if not o.n:
+            return math.inf
+        centre, radius = self._junction_circle(edge)
+        d = centre - o.front
+        dist = np.hypot(d[:, 0], d[:, 1])
+        toward = d[:, 0] * o.cos + d[:, 1] * o.sin > 0.0
+        turn = np.abs(np.remainder(o.head - float(self.pose[2]) + math.pi, 2.0 * math.pi)
+                      - math.pi)
+        near = np.flatnonzero(((dist <= radius) | (toward & (dist <= radius + ALLWAY_REACH)))
+                              & (turn > CROSSING))
+        foes = [j for j in near.tolist() if o.ids[j] not in self.board]
+        if not foes:
+            return math.inf
+        c = self._stop_short(line - front)
+        if c < cap:
+            self.why_slow = (f"giving way at an all-way stop to vehicle '{o.ids[foes[0]]}'")
+        return c
+
+    def _junction_circle(self, edge: str) -> tuple[FloatArray, float]:
+        """Centre [m] and radius [m] of the bounding circle of the outline of the junction
+        that ``edge`` ends at."""
+        net = self.net
+        shape = np.asarray(net.junction_shapes.get(net.to_nodes[net.edge_index(edge)],
+                                                   np.zeros((1, 2))), dtype=float)
+        centre = shape.mean(axis=0)
+        return centre, float(np.max(np.hypot(*(shape - centre).T)))
+
+    def _next_stop_kind(self) -> str:
+        """The kind of stop (:meth:`~splineplan.network.RoadNetwork.stop_kind`) at the
+        next junction on the route, ``""`` where it has none; the one the vehicle stands
+        at, or has just left, counts while it is not yet in the junction."""
+        front = self.station + self.sc.ego.length / 2.0
+        for a, _ in self._junction_spans:
+            if a >= front - STOP_REACH:
+                return next((k for line, _, k in self._stop_lines if line == a), "")
+        return ""
 
     def _lane_reach(self, lane_id: str, width: float) -> float:
         """How far [m] the ego can go along its path before its footprint comes within
@@ -462,7 +589,26 @@ class Control(Perception):
         b = self.sc.trajectory.b_max
         if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * max(ahead, 0.0):
             return math.inf
-        return math.sqrt(max(2.0 * b * (ahead - YIELD_STOP - self.v * self.dt), 0.0))
+        stand = self._before_change(ahead - YIELD_STOP)
+        return math.sqrt(max(2.0 * b * (stand - self.v * self.dt), 0.0))
+
+    def _before_change(self, stand: float) -> float:
+        """Where [m ahead along the plan] the vehicle is to stand instead of ``stand``:
+        :data:`YIELD_STOP` before the lane change ahead (``lane_change``) where it would
+        otherwise stand with its footprint over the lane line (SUMO's drivers in the next
+        lane see a car by its lane and lateral offset, not its corner), if it still can
+        stop there at its emergency braking; else ``stand``."""
+        ch = self.lane_change
+        if ch is None:
+            return stand
+        at = ch.at - self.u
+        if at <= 0.0 or not at <= stand < ch.end - self.u:
+            return stand  # changing already, or standing before or after the change
+        before = max(at - YIELD_STOP, 0.0)
+        b = self.sc.trajectory.b_max
+        if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * before:
+            return stand
+        return before
 
     def _change_speed(self) -> float:
         """Speed cap [m/s] that waits for a gap before changing lanes: where the plan
@@ -600,6 +746,12 @@ class Control(Perception):
         self._times_key = key
         self._times = (i0, vn.tolist(), tcum.tolist())
         return self._times
+
+
+def _reach_time(dist: float, speed: float, accel: float) -> float:
+    """Time [s] to cover ``dist`` [m] from ``speed`` [m/s] speeding up at ``accel``
+    [m/s²]."""
+    return (math.sqrt(speed * speed + 2.0 * accel * dist) - speed) / accel
 
 
 def _lane_index(lane_id: str) -> int:

@@ -118,6 +118,10 @@ class Driver(Replanning, Control):
         self.published_plan: Any = None
         self.own_plan: Any = None  # its latest published plan (kept)
         self.waiting_for: tuple[str, ...] = ()
+        self.plan_wait: float | None = None  # see Replanning._take
+        self._stop_lines: list[tuple[float, str, str]] = []  # see Replanning._set_route
+        self.stops_done: set[str] = set()
+        self.stop_since: float | None = None
         self.trusted: dict[str, Any] = {}
         self.board_seen = 0
         self.wait_replan_at = 0.0

@@ -165,12 +165,14 @@ def onto_road(window: Corridor, xy: tuple[float, float]) -> tuple[float, float] 
 class LaneChange:
     """Where a plan first reaches into the next lane: the plan's station ``at`` [m], that
     lane's index ``lane`` counted from the right among the lanes the vehicle may use, the
-    lanes' ``width`` [m], and the lane's SUMO id."""
+    lanes' ``width`` [m], the lane's SUMO id, and the station ``end`` [m] where its
+    footprint is inside one lane again (``inf``: not before the next junction)."""
 
     at: float
     lane: int
     width: float
     lane_id: str
+    end: float = float("inf")
 
 
 #: Slack [m] by which a footprint may reach over a lane line before it counts as in the
@@ -179,13 +181,15 @@ LINE_SLACK = 0.1
 
 
 def lane_entry(lateral: FloatArray, right: FloatArray, reach: FloatArray, *,
-               lane_width: float) -> tuple[int, int] | None:
+               lane_width: float) -> tuple[int, int, int] | None:
     """Where a path first reaches into another lane: the index of the first of its samples
     (centre offsets ``lateral`` [m], road's right boundary ``right`` [m] at each, along one
     edge) whose footprint, reaching ``reach`` [m] to each side of its centre, reaches
     over a line of the lane its first sample's centre is in (by more than
-    :data:`LINE_SLACK`), and that lane's index (counted from the right, in lanes of
-    ``lane_width`` [m]); ``None`` if it stays in its lane."""
+    :data:`LINE_SLACK`), that lane's index (counted from the right, in lanes of
+    ``lane_width`` [m]), and the index of the first sample after it whose footprint is
+    inside one lane again (the number of samples if none is); ``None`` if it stays in its
+    lane."""
     if not len(lateral) or lane_width <= 0.0:
         return None
     rel = np.asarray(lateral, dtype=float) - np.asarray(right, dtype=float)
@@ -197,7 +201,12 @@ def lane_entry(lateral: FloatArray, right: FloatArray, reach: FloatArray, *,
     if not out.any():
         return None
     k = int(np.argmax(out))
-    return k, here + 1 if out_left[k] else here - 1
+    lane = np.floor(rel / lane_width)
+    inside = ((rel + reach <= (lane + 1) * lane_width + LINE_SLACK)
+              & (rel - reach >= lane * lane_width - LINE_SLACK))
+    inside[:k] = False
+    end = int(np.argmax(inside)) if inside.any() else len(rel)
+    return k, here + 1 if out_left[k] else here - 1, end
 
 
 def side_reach(relative_heading: FloatArray, half_length: float, half_width: float

@@ -5,6 +5,7 @@ edge avoided. No SUMO calls: a new route is left in ``route_request`` for the ru
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import time
@@ -54,6 +55,8 @@ _TRAFFIC_REPLAN_EVERY = 0.5
 GO_EARLY = 0.5
 #: A plan has the vehicle move on once it has gone this far [m].
 _GO_MOVED = 0.5
+#: A plan stands where its speed is at most this [m/s].
+_STANDS = 0.05
 #: Period [s] of the checks for new obstacles ahead and for traffic beside the ego coming
 #: near the plan (a reaction time well below a driver's; the deviation and horizon checks,
 #: and the ego's own safety checks, run every step).
@@ -127,6 +130,12 @@ class Replanning(Perception):
         self._junction_spans = ([(a, b) for a, b in zip(ends[:-1], self._edge_starts[1:],
                                                          strict=True) if b > a]
                                 if len(ends) == len(self._edge_starts) else [])
+        # the stop lines on the route (stop signs, all-way stops): the edge's end, the edge
+        # (a stop is done once per edge) and the kind (network.stop_kind)
+        kinds = ([self.net.stop_kind(e, f, ego.vclass) for e, f in itertools.pairwise(edges)]
+                 if len(ends) == len(edges) else [])
+        self._stop_lines = [(a, e, k) for a, e, k in zip(ends[:-1], edges[:-1], kinds,
+                                                         strict=False) if k]
         self._obs_cache = {}
         i = len(edges) - 1
         goal_len = self.net.length_of(ego.goal_edge)
@@ -481,6 +490,12 @@ class Replanning(Perception):
         self.path_xy = np.column_stack((np.interp(u, s, traj.x), np.interp(u, s, traj.y)))
         self.path_heading = np.interp(u, s, np.unwrap(traj.heading))
         self.path_speed = np.interp(u, s, traj.speed)
+        # where the plan first stands, past its start and before its end (a wait for
+        # another's plan)
+        sp = np.asarray(traj.speed, dtype=float)
+        stand = np.flatnonzero((sp <= _STANDS) & (s > s[0] + _GO_MOVED)
+                               & (s < s[-1] - _GO_MOVED))
+        self.plan_wait = float(s[stand[0]]) if len(stand) else None
         ext = np.arange(1, int(_PATH_EXTENSION / _PATH_SPACING) + 1) * _PATH_SPACING
         h_end = self.path_heading[-1]
         self.ext_s = u[-1] + ext
@@ -545,9 +560,11 @@ class Replanning(Perception):
                            lane_width=width)
         if found is None or not 0 <= found[1] < len(lanes):
             return None
-        k, lane = found
-        return LaneChange(float(self.path_s[ahead][k]), lane, width,
-                          f"{self._edge_at(self.station)}_{lanes[lane].index}")
+        k, lane, k_end = found
+        s = self.path_s[ahead]
+        return LaneChange(float(s[k]), lane, width,
+                          f"{self._edge_at(self.station)}_{lanes[lane].index}",
+                          float(s[k_end]) if k_end < len(sl) else math.inf)
 
     def _reroute(self, err: RoadBlockedError) -> tuple[bool, Any]:
         """Level 1 again with the blocked edge avoided. Returns (done, detail or error)."""
