@@ -3,6 +3,8 @@ traffic (``splineplan.closedloop.lanes``), on plain corridors."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from conftest import NETS
 
@@ -110,3 +112,32 @@ def test_onto_road_moves_a_start_just_outside_back_in() -> None:
     assert np.isclose(x, 50.0) and np.isclose(y, 3.2 - ONTO_INSET)
     assert onto_road(c, (50.0, 1.0)) is None  # inside: as it is
     assert onto_road(c, (50.0, -4.5)) is None  # too far out to move
+
+
+def test_a_stop_across_a_lane_line_moves_before_the_lane_change() -> None:
+    """Where the plan reaches over the line from 20 m to 30 m ahead, a vehicle that would
+    stand anywhere in that stretch stands 1 m (``YIELD_STOP``) before it instead, if it can
+    still stop there at its emergency braking; a stand before or after the stretch, or a
+    lane change already begun, is left as it is."""
+    from types import SimpleNamespace
+
+    from splineplan.closedloop.control import EMERGENCY_FACTOR, YIELD_STOP, Control
+    from splineplan.closedloop.lanes import LaneChange
+
+    b = 4.5
+    change = LaneChange(at=25.0, lane=0, width=3.2, lane_id="e_0", end=35.0)
+
+    def stand(where: float, *, u: float = 5.0, v: float = 5.0) -> float:
+        me = SimpleNamespace(lane_change=change, u=u, v=v,
+                             sc=SimpleNamespace(trajectory=SimpleNamespace(b_max=b)))
+        return float(Control._before_change(me, where))  # type: ignore[arg-type]
+
+    for where in (20.0, 25.0, 29.9):  # in the stretch: before it
+        assert stand(where) == 20.0 - YIELD_STOP
+    assert stand(19.0) == 19.0 and stand(30.0) == 30.0  # before, after
+    assert stand(25.0, u=26.0) == 25.0  # changing already
+    assert LaneChange(at=1.0, lane=0, width=3.2, lane_id="e_0").end == math.inf
+    # just too fast to stop 19 m on at twice the comfortable braking: stands where it was
+    fast = math.sqrt(2.0 * EMERGENCY_FACTOR * b * (20.0 - YIELD_STOP)) + 0.01
+    assert stand(25.0, v=fast) == 25.0
+    assert stand(25.0, v=fast - 0.02) == 20.0 - YIELD_STOP
