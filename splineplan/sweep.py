@@ -303,7 +303,8 @@ def summary_markdown(result: SweepResult) -> str:
                      f"{s['planned']} ({s['planned_arrived']}) | {s['collisions']} | "
                      f"{s['overlaps_planned']} / {s['overlaps_unplanned']} | "
                      + " | ".join(cells) + " |")
-    lines += ["", "Collisions: by the planned vehicles' own footprint check; overlapping "
+    lines += ["", "Collisions: the steps in which a planned vehicle's own footprint check "
+              "found it overlapping another; overlapping "
               "pairs: pairs of vehicles whose footprints overlapped (FCD output), with a "
               "planned vehicle and of two of SUMO's own. "
               "Means over seeds ± their standard deviation; travel time and time loss "
