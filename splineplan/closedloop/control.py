@@ -307,7 +307,7 @@ class Control(Perception):
 
     def _stop_sign_speed(self) -> float:
         """Speed cap [m/s] that stops at the next stop sign or all-way stop on the route
-        (:meth:`~splineplan.network.RoadNetwork.must_stop`), as SUMO's drivers do: the
+        (:meth:`~splineplan.network.RoadNetwork.stop_kind`), as SUMO's drivers do: the
         front :data:`STOP_LINE` before the line, standing there :data:`STOP_WAIT`; then
         that stop is done. A vehicle that cannot stop before the line at its emergency
         braking goes on."""

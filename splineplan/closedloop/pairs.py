@@ -6,6 +6,12 @@ speed and heading (the first time their rectangles would touch, within
 :data:`TTC_HORIZON`); the smallest of each over the run, for all pairs and for the pairs
 with a planned vehicle, and the pairs with a planned vehicle whose footprints overlapped
 (and, for comparison, how many pairs of SUMO's own vehicles did).
+
+The smallest time-to-collision of a run is 0 wherever any two vehicles touch (SUMO's own
+vehicles overlap in junctions), so it says little; the time exposed to a time-to-collision
+below :data:`TET_THRESHOLD` (TET, Minderhoud and Bovy 2001), summed over pairs and divided
+by the vehicles' time in the run, measures how often vehicles come close, and compares
+runs of different sizes.
 """
 
 from __future__ import annotations
