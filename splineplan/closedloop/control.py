@@ -116,8 +116,7 @@ class Control(Perception):
         if self.stop_at is not None and not self.why_slow:
             self.why_slow = f"stopping before a blockage ({self.reason})"
         if v_plan < v_cap and self.waiting_for:
-            self.why_slow = ("waiting for the published plan of "
-                             + ", ".join(f"'{v}'" for v in self.waiting_for))
+            self.why_slow = f"waiting for the published plan of {self._waited_for()}"
         emergency = EMERGENCY_FACTOR * tp.b_max
         v_new = min(max(v_target, self.v - emergency * dt), self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
@@ -135,6 +134,16 @@ class Control(Perception):
         self.pose = np.array([x, y, h])
         del ego
         return self._move(x, y, h)
+
+    def _waited_for(self) -> str:
+        """The vehicles whose published plans this one waits for, quoted, for ``why_slow``."""
+        return ", ".join(f"'{v}'" for v in self.waiting_for)
+
+    def _stand_within(self, dist: float) -> float:
+        """Speed cap [m/s] that stands within ``dist`` [m] ahead at the comfortable braking,
+        one step early (at once where it is that near already)."""
+        b = self.sc.trajectory.b_max
+        return math.sqrt(max(2.0 * b * (dist - self.v * self.dt), 0.0))
 
     def _move(self, x: float | None = None, y: float | None = None, h: float | None = None
               ) -> Move:
@@ -213,14 +222,12 @@ class Control(Perception):
                     cap = clear
                     self.why_slow = (f"keeping the junction clear: vehicle "
                                      f"'{o.ids[gap_to]}' stands beyond it")
-        if stop_front is not None and gap_to >= 0:
-            # not across a lane line behind a queue: before the lane change instead
-            stand = stop_front - ego.length / 2.0 - self.u
-            before = self._before_change(stand)
-            if before < stand:
-                c = math.sqrt(max(2.0 * tp.b_max * (before - self.v * self.dt), 0.0))
-                if c < cap:
-                    cap = c
+            if stop_front is not None:
+                # not across a lane line behind a queue: before the lane change instead
+                stand = stop_front - ego.length / 2.0 - self.u
+                before = self._before_change(stand)
+                if before < stand and self._stand_within(before) < cap:
+                    cap = self._stand_within(before)
                     self.why_slow = (f"waiting before its lane change: vehicle "
                                      f"'{o.ids[gap_to]}' stands beyond it")
         if self.keep_clear and self.waiting_for and self.plan_wait is not None:
@@ -229,8 +236,7 @@ class Control(Perception):
             if clear < cap:
                 cap = clear
                 self.why_slow = ("keeping the junction clear while it waits for the "
-                                 "published plan of "
-                                 + ", ".join(f"'{v}'" for v in self.waiting_for))
+                                 f"published plan of {self._waited_for()}")
         red, give = self._red_light_speed(), self._yield_speed()
         if red < cap:
             cap, self.why_slow = red, "stopping at a red light"
@@ -254,10 +260,9 @@ class Control(Perception):
         """Speed cap [m/s] that keeps a junction clear, as SUMO's drivers do: where the
         vehicle would come to stand inside the next junction on its route (its front at
         ``stop_front``, a station on its path, behind a vehicle that stands beyond, or
-        where its plan waits for another's), it
-        stops :data:`YIELD_STOP` before the junction instead, if it still can at its
-        emergency braking; once inside (by the route's stations or on SUMO's junction
-        lanes), it goes on."""
+        where its plan waits for another's), it stops :data:`YIELD_STOP` before the
+        junction instead, if it still can at its emergency braking; once inside (by the
+        route's stations or on SUMO's junction lanes), it goes on."""
         ego, b = self.sc.ego, self.sc.trajectory.b_max
         if self.last_lane.startswith(":"):
             return math.inf  # SUMO has it in a junction already
@@ -270,8 +275,7 @@ class Control(Perception):
                 break  # stands before the junction, or behind it
             if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * (j_in - front):
                 break  # cannot stop before it
-            room = j_in - front - YIELD_STOP
-            return math.sqrt(max(2.0 * b * (room - self.v * self.dt), 0.0))
+            return self._stand_within(j_in - front - YIELD_STOP)
         return math.inf
 
     def _keeps_to_plan(self, j: int, path_heading: float) -> bool:
@@ -332,7 +336,7 @@ class Control(Perception):
             self.stop_since = None
             if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * (line - front):
                 return math.inf  # cannot stop before it
-            return math.sqrt(max(2.0 * b * (room - self.v * self.dt), 0.0))
+            return self._stand_within(room)
         return math.inf
 
     def _yield_speed(self) -> float:
@@ -431,6 +435,8 @@ class Control(Perception):
         """The kind of stop (:meth:`~splineplan.network.RoadNetwork.stop_kind`) at the
         next junction on the route, ``""`` where it has none; the one the vehicle stands
         at, or has just left, counts while it is not yet in the junction."""
+        if not self._stop_lines:
+            return ""
         front = self.station + self.sc.ego.length / 2.0
         for a, _ in self._junction_spans:
             if a >= front - STOP_REACH:
@@ -589,8 +595,7 @@ class Control(Perception):
         b = self.sc.trajectory.b_max
         if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * max(ahead, 0.0):
             return math.inf
-        stand = self._before_change(ahead - YIELD_STOP)
-        return math.sqrt(max(2.0 * b * (stand - self.v * self.dt), 0.0))
+        return self._stand_within(self._before_change(ahead - YIELD_STOP))
 
     def _before_change(self, stand: float) -> float:
         """Where [m ahead along the plan] the vehicle is to stand instead of ``stand``:
