@@ -134,9 +134,14 @@ def _peak(csv: Path, column: str, replans: list[float]) -> dict[str, float | Non
     speed [m/s] and the time since the last replan before it [s]."""
     if not csv.exists():
         return None
-    d = np.genfromtxt(csv, delimiter=",", names=True)
-    if d.size < 3:
+    import csv as csvlib
+
+    # the numeric columns only (Monaco's lane ids hold '#', numpy's comment character)
+    with csv.open(newline="") as f:
+        rows = list(csvlib.DictReader(f))
+    if len(rows) < 3:
         return None
+    d = {k: np.array([float(r[k]) for r in rows]) for k in ("t", "station", "speed", column)}
     i = int(np.argmax(np.abs(d[column])))
     t = float(d["t"][i])
     before = [r for r in replans if r <= t]
