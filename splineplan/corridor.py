@@ -39,6 +39,11 @@ GRID_RINGS = 8
 UNBOUNDED = 1e9
 
 
+#: Room [m] beyond a corridor's sides below which its paved offsets count as none
+#: (:meth:`Corridor.paved`).
+PAVED_MIN = 0.05
+
+
 @dataclass(frozen=True, eq=False)
 class Corridor:
     """Drivable road stretch in a Frenet frame.
@@ -67,6 +72,12 @@ class Corridor:
         Station ``(len(edges),)`` [m] at which each edge's own stretch ends: from there to
         the next edge's start the corridor crosses a junction (empty: unknown, no
         junctions).
+    paved_left, paved_right
+        Lateral offsets ``(n,)`` [m] of the paved area around the junctions where it
+        reaches beyond ``left`` and ``right`` (SUMO's junction outline beside a turn's
+        lanes), elsewhere equal to them; ``None``: none known. A plan keeps to ``left`` and
+        ``right``, and takes this room only where no feasible curve does
+        (:meth:`paved`).
     """
 
     reference: FloatArray
@@ -79,6 +90,8 @@ class Corridor:
     keep_left: FloatArray | None = None
     keep_right: FloatArray | None = None
     edge_ends: FloatArray = field(default_factory=lambda: np.zeros(0))
+    paved_left: FloatArray | None = None
+    paved_right: FloatArray | None = None
     _grid: tuple[Any, ...] = field(init=False, repr=False)
     _heading: FloatArray = field(init=False, repr=False)
     _cos: FloatArray = field(init=False, repr=False)
@@ -102,8 +115,12 @@ class Corridor:
         if (keeps[0] is None) != (keeps[1] is None) or any(
                 k is not None and k.shape != self.s.shape for k in keeps):
             raise GeometryError("corridor needs both keep offsets, one per station, or none")
+        paved = (self.paved_left, self.paved_right)
+        if (paved[0] is None) != (paved[1] is None) or any(
+                p is not None and p.shape != self.s.shape for p in paved):
+            raise GeometryError("corridor needs both paved offsets, one per station, or none")
         for name in ("reference", "s", "left", "right", "edge_starts", "keep_left",
-                     "keep_right", "edge_ends"):
+                     "keep_right", "edge_ends", "paved_left", "paved_right"):
             if getattr(self, name) is not None:
                 getattr(self, name).setflags(write=False)
         d = np.diff(self.reference, axis=0)
@@ -293,7 +310,11 @@ class Corridor:
             starts, edges = starts[last_before:], edges[last_before:]
             ends = ends[last_before:] if len(ends) else ends
         kr, kl = ((None, None) if self.keep_left is None else self.keep_at(ss))
-        return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr, ends)
+        pl = pr = None
+        if self.paved_left is not None and self.paved_right is not None:
+            pl, pr = np.interp(ss, self.s, self.paved_left), np.interp(ss, self.s, self.paved_right)
+        return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr, ends,
+                        pl, pr)
 
     def extend_back(self, length: float) -> Corridor:
         """The corridor with ``length`` [m] more before its start, straight along its first
@@ -316,8 +337,28 @@ class Corridor:
         if len(starts):
             starts[0] = 0.0
         ends = self.edge_ends + length if len(self.edge_ends) else self.edge_ends
+        pl = None if self.paved_left is None else ahead(self.paved_left)
+        pr = None if self.paved_right is None else ahead(self.paved_right)
         return Corridor(ref, ss, ahead(self.left), ahead(self.right), self.edges, starts,
-                        self.offset - length, kl, kr, ends)
+                        self.offset - length, kl, kr, ends, pl, pr)
+
+    def paved(self) -> Corridor | None:
+        """The corridor widened to its paved offsets (``paved_left``, ``paved_right``),
+        ``None`` where they add no room (by more than :data:`PAVED_MIN` anywhere).
+
+        A junction's lanes can leave a turn too tight for a car where SUMO's paving
+        around them does not: a planner that finds no feasible curve between ``left``
+        and ``right`` may try this one."""
+        pl, pr = self.paved_left, self.paved_right
+        if pl is None or pr is None:
+            return None
+        lft, rgt = np.maximum(self.left, pl), np.minimum(self.right, pr)
+        if not (np.any(lft - self.left > PAVED_MIN) or np.any(self.right - rgt > PAVED_MIN)):
+            return None
+        wide: Corridor = self.derived("paved", lambda: Corridor(
+            self.reference, self.s, lft, rgt, self.edges, self.edge_starts, self.offset,
+            self.keep_left, self.keep_right, self.edge_ends))
+        return wide
 
     def segments(self, length: float, overlap: float = 0.0) -> list[Corridor]:
         """The corridor cut into pieces of at most ``length`` [m] (the last may be shorter).

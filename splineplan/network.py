@@ -616,11 +616,15 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
     ends_s = _project_each(probe, np.array([pieces[k][0][-1] for k in starts]), own)
     ends_s = np.clip(ends_s, starts_s, np.append(starts_s[1:], probe.length))
     # each junction's stretch within the paving of it and of the junctions beside it (a
-    # short edge between two junctions lies in both stretches), holding its internal lanes
+    # short edge between two junctions lies in both stretches), holding its internal lanes;
+    # and how far that paving reaches beyond it
+    paved_left, paved_right = np.full_like(left_off, -np.inf), np.full_like(right_off, np.inf)
     for i in range(len(edges) - 1):
         _clip_to_paved(probe, left_off, right_off, ends_s[i], starts_s[i + 1],
                        _paving(network, edges[max(i - 1, 0):i + 3], cls),
-                       _internal_paving(network, edges[i], edges[i + 1], cls))
+                       _internal_paving(network, edges[i], edges[i + 1], cls),
+                       (paved_left, paved_right))
+    paved_left, paved_right = np.maximum(paved_left, left_off), np.minimum(paved_right, right_off)
     keep_left = keep_right = None
     if keep:
         keep_left, keep_right = _union_offsets(probe, keep,
@@ -629,7 +633,7 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         keep_left = np.minimum(keep_left, left_off)
         keep_right = np.maximum(keep_right, right_off)
     return Corridor(probe.reference, probe.s, left_off, right_off, edges, starts_s, 0.0,
-                    keep_left, keep_right, ends_s)
+                    keep_left, keep_right, ends_s, paved_left, paved_right)
 
 
 #: Length [m] of the lanes before and after a junction that count as its paving (see
@@ -644,6 +648,13 @@ PAVING_GAP = 0.3
 PAVING_CAP = 0.5
 #: Distance [m] from the reference line within which the paving is searched.
 PAVING_RANGE = 30.0
+#: Farthest [m] a corridor's paved offsets (:meth:`~splineplan.corridor.Corridor.paved`)
+#: reach beyond its sides (of 100 random Monaco routes, 60 were feasible without them, 64
+#: with 0.5 m, 70 with 1 m, 69 with 2 m).
+PAVED_REACH = 1.0
+#: How far [m] the paved offsets keep inside the paving's edge (its pieces are joined
+#: across gaps of up to :data:`PAVING_GAP`, and its curved kerbs are polygons).
+PAVED_INSET = 0.05
 
 
 def _paving(network: RoadNetwork, edges: tuple[str, ...], vclass: str
@@ -798,12 +809,15 @@ def _lane_quads(centre: FloatArray, width: float, *, back: bool = True,
 
 def _clip_to_paved(probe: Corridor, left: FloatArray, right: FloatArray, s0: float,
                    s1: float, paving: tuple[FloatArray, FloatArray, IntArray],
-                   lanes: tuple[FloatArray, FloatArray, IntArray]) -> None:
+                   lanes: tuple[FloatArray, FloatArray, IntArray],
+                   paved: tuple[FloatArray, FloatArray]) -> None:
     """Offsets ``left``, ``right`` (in place) between stations ``s0`` and ``s1`` [m] (and
     :data:`PAVING_PAD` beyond) cut to the paved stretch of the normal that holds the
     corridor's middle, where one does (the rounded kerbs of a junction band can reach
     beyond SUMO's junction outline), and widened to the stretch of the junction's
-    ``lanes`` (its internal lanes, which SUMO's vehicles drive) that holds it."""
+    ``lanes`` (its internal lanes, which SUMO's vehicles drive) that holds it. The
+    offsets ``paved`` (left, right; in place) widen to that paved stretch, at most
+    :data:`PAVED_REACH` beyond the cut offsets."""
     offsets = paving[2]
     if len(offsets) < 2:
         return
@@ -817,16 +831,21 @@ def _clip_to_paved(probe: Corridor, left: FloatArray, right: FloatArray, s0: flo
     h = probe.heading_at(probe.s[i0:i1])
     tx, ty = np.cos(h), np.sin(h)
     mid = (left[i0:i1] + right[i0:i1]) / 2.0
-    lo, hi = _paved_spans(cx, cy, tx, ty, mid, *_kernel_polygons(paving), PAVING_GAP)
-    ok = np.isfinite(lo)
-    lft = np.where(ok, np.minimum(left[i0:i1], hi), left[i0:i1])
-    rgt = np.where(ok, np.maximum(right[i0:i1], lo), right[i0:i1])
+    plo, phi = _paved_spans(cx, cy, tx, ty, mid, *_kernel_polygons(paving), PAVING_GAP)
+    pok = np.isfinite(plo)
+    lft = np.where(pok, np.minimum(left[i0:i1], phi), left[i0:i1])
+    rgt = np.where(pok, np.maximum(right[i0:i1], plo), right[i0:i1])
     if len(lanes[2]) > 1:
         lo, hi = _paved_spans(cx, cy, tx, ty, mid, *_kernel_polygons(lanes), PAVING_GAP)
         ok = np.isfinite(lo)
         lft = np.where(ok, np.maximum(lft, hi), lft)
         rgt = np.where(ok, np.minimum(rgt, lo), rgt)
     left[i0:i1], right[i0:i1] = lft, rgt
+    pl, pr = paved[0][i0:i1], paved[1][i0:i1]
+    paved[0][i0:i1] = np.where(pok, np.maximum(pl, np.minimum(phi - PAVED_INSET,
+                                                              lft + PAVED_REACH)), pl)
+    paved[1][i0:i1] = np.where(pok, np.minimum(pr, np.maximum(plo + PAVED_INSET,
+                                                              rgt - PAVED_REACH)), pr)
 
 
 def _kernel_polygons(polys: tuple[FloatArray, FloatArray, IntArray]

@@ -10,6 +10,11 @@ placed where the road is straightest and keeps its width (:func:`cut_stations`):
 inside a tight turn would restart the next curve with zero curvature there, and a
 segment's end inside a turn ends its curve on a clamped corner.
 
+Where a segment's curve is infeasible between the corridor's sides (a junction turn whose
+lanes are too tight for the car), the segment is planned again on the corridor widened to
+SUMO's paving around its junctions (:meth:`Corridor.paved`, at most
+:data:`~splineplan.network.PAVED_REACH` beyond the lanes), and the better plan is kept.
+
 Level 2 models the vehicle as a disc of its width; a rectangle's corners reach
 ``(vehicle_length - vehicle_width) / 2`` [m] further ahead and behind. So level 2 plans among
 obstacles elongated by that much along the road (:meth:`Obstacles.elongated`, along the
@@ -31,7 +36,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import ArrayLike, NDArray
 
 from splineplan.corridor import Corridor
-from splineplan.errors import SplineplanError, TrajectoryError
+from splineplan.errors import RoadBlockedError, SplineplanError, TrajectoryError
 from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
@@ -40,6 +45,7 @@ from splineplan.trajectory import (
     IterationStats,
     Trajectory,
     TrajectoryParams,
+    _less_violating,
     _times,
     broken_limits,
     check_start_speed,
@@ -152,24 +158,20 @@ def plan_corridor(
         for attempt, cut in enumerate(joins):
             if prev is not None:
                 pose = np.array([prev.x[cut], prev.y[cut]])
-            t0 = time.perf_counter()
-            t1 = t0
+            clock = [0.0, 0.0]
             try:
-                rm = plan_roadmap(seg, seg_grown, pose, rp)
-                t1 = time.perf_counter()
-                tr = plan_trajectory(
-                    rm, seg, seg_obs, tp if prev is None else tp_join,
+                rm, tr = _plan_segment(
+                    seg, seg_grown, seg_obs, pose, rp, tp if prev is None else tp_join,
                     start_heading if prev is None else float(prev.heading[cut]),
-                    start_speed=start_speed if prev is None else float(prev.speed[cut]),
-                    end_speed=None, polish=not hopeless)
+                    start_speed if prev is None else float(prev.speed[cut]),
+                    not hopeless, clock)
             except SplineplanError:
                 if attempt + 1 == len(joins):
                     raise
                 continue
             finally:
-                t2 = time.perf_counter()
-                t_roadmap += t1 - t0
-                t_traj += t2 - t1
+                t_roadmap += clock[0]
+                t_traj += clock[1]
             tried.append((cut, rm, tr))
             if tr.feasible or not _fails_near_start(tr, overlap, tp.kappa_max):
                 break  # another join moves only the start: it cannot mend a failure further on
@@ -186,6 +188,63 @@ def plan_corridor(
     joined = _join(parts, tp, start_speed, end_speed)
     t_traj += time.perf_counter() - t3
     return CorridorPlan(roadmaps, joined, t_roadmap, t_traj)
+
+
+def _plan_segment(seg: Corridor, grown: Obstacles, obstacles: Obstacles, pose: FloatArray,
+                  rp: RoadmapParams, tp: TrajectoryParams, heading: float | None,
+                  speed: float, polish: bool, clock: list[float]
+                  ) -> tuple[Roadmap, Trajectory]:
+    """Levels 2 and 3 on one segment from ``pose``. Where that gives no feasible curve, or
+    cannot start (a car that cut a junction's corner stands beside its lanes), the same
+    on the segment widened to the junctions' paving (:meth:`Corridor.paved`): its plan is
+    kept if it is feasible, or less infeasible (:func:`~splineplan.trajectory._less_violating`;
+    a car already on the paving), or the only one where the segment was not found
+    blocked. ``clock`` gains the seconds of level 2 and level 3."""
+    wide = seg.paved() if polish else None
+    try:
+        rm, tr = _levels_2_3(seg, grown, obstacles, pose, rp, tp, heading, speed, polish,
+                             clock)
+    except SplineplanError as err:
+        if wide is None:
+            raise
+        try:
+            rm2, tr2 = _levels_2_3(wide, grown, obstacles, pose, rp, tp, heading, speed,
+                                   polish, clock)
+        except SplineplanError:
+            raise err from None
+        if tr2.feasible or not isinstance(err, RoadBlockedError):
+            return rm2, tr2
+        raise
+    if tr.feasible or wide is None:
+        return rm, tr
+    try:
+        rm2, tr2 = _levels_2_3(wide, grown, obstacles, pose, rp, tp, heading, speed, polish,
+                               clock)
+    except SplineplanError:
+        return rm, tr
+    log.debug("segment at %.1f m: feasible on the paved junctions: %s", seg.offset,
+              tr2.feasible)
+    return (rm, tr) if _less_violating(tr, tr2, tp) is tr else (rm2, tr2)
+
+
+def _levels_2_3(seg: Corridor, grown: Obstacles, obstacles: Obstacles, pose: FloatArray,
+                rp: RoadmapParams, tp: TrajectoryParams, heading: float | None,
+                speed: float, polish: bool, clock: list[float]
+                ) -> tuple[Roadmap, Trajectory]:
+    """Level 2's roadmap and level 3's trajectory on one segment; ``clock`` gains their
+    seconds."""
+    t0 = time.perf_counter()
+    t1 = t0
+    try:
+        rm = plan_roadmap(seg, grown, pose, rp)
+        t1 = time.perf_counter()
+        tr = plan_trajectory(rm, seg, obstacles, tp, heading, start_speed=speed,
+                             end_speed=None, polish=polish)
+    finally:
+        t2 = time.perf_counter()
+        clock[0] += t1 - t0
+        clock[1] += t2 - t1
+    return rm, tr
 
 
 def warm_up() -> None:

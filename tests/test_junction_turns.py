@@ -273,15 +273,19 @@ def test_a_feasible_monaco_turn_stays_on_the_paving(
     assert outside(turn, np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.heading)) <= TOL
 
 
-def _corridor_reach(net: RoadNetwork, builder: TurnBuilder, a: str, b: str) -> float:
-    """How far [m] the corridor's sides reach beyond the turn's paving (shapely), over
-    its stretch from 3 m before the start to 3 m past the goal."""
+def _corridor_reach(net: RoadNetwork, builder: TurnBuilder, a: str, b: str,
+                    paved: bool = False) -> float:
+    """How far [m] the corridor's sides (``paved``: its paved sides) reach beyond the
+    turn's paving (shapely), over its stretch from 3 m before the start to 3 m past the
+    goal."""
     import shapely
 
     from splineplan.network import route_corridor
 
     turn = builder.turn(a, b)
     cor = route_corridor(net, shortest_route(net, a, b))
+    if paved:
+        cor = cor.paved() or cor
     s0 = cor.to_sl(np.array([turn.start[:2]]))[0, 0] - 3.0
     s1 = cor.to_sl(np.array(turn.goal.centroid.coords))[0, 0] + 3.0
     near = (cor.s >= s0) & (cor.s <= s1)
@@ -294,14 +298,97 @@ def _corridor_reach(net: RoadNetwork, builder: TurnBuilder, a: str, b: str) -> f
 REACH_TOL = 0.04
 
 
+@pytest.mark.parametrize("paved", [False, True], ids=["lanes", "paved"])
 @pytest.mark.parametrize("name", ["city", "grid"])
-def test_the_corridor_stays_on_the_paving_through_every_junction(name: str) -> None:
+def test_the_corridor_stays_on_the_paving_through_every_junction(name: str,
+                                                                 paved: bool) -> None:
     """Through every junction turn of the bundled networks the corridor's sides stay on
     the turn's paving (within :data:`REACH_TOL`): the internal lanes that widen it end
     where SUMO draws them, and a lane reaches into the junction only within the hull of
     its outline (the city's kerbs reached 5.5 cm beyond it where an internal lane's end
-    was extended past the lane it joins at an angle)."""
+    was extended past the lane it joins at an angle). So do its paved sides, which reach
+    beyond the lanes onto SUMO's junction outline."""
     net, builder, turns = _net(name)
-    reach = {(a, b): _corridor_reach(net, builder, a, b) for a, b in turns}
+    reach = {(a, b): _corridor_reach(net, builder, a, b, paved) for a, b in turns}
     worst = max(reach, key=reach.__getitem__)
     assert reach[worst] <= REACH_TOL, (worst, reach[worst])
+
+
+def test_the_paved_sides_reach_beyond_the_lanes_only_round_junctions() -> None:
+    """A route's paved offsets are the corridor's sides along its edges, and reach beyond
+    them (at most :data:`~splineplan.network.PAVED_REACH`) only within a junction's
+    stretch and the few metres beside it (:data:`~splineplan.network.PAVING_PAD`)."""
+    from splineplan.network import PAVED_REACH, PAVING_PAD, route_corridor
+
+    net, _, _ = _net("city")
+    cor = route_corridor(net, shortest_route(net, "SWA0", "RNC0"))
+    assert cor.paved_left is not None and cor.paved_right is not None
+    extra = np.maximum(cor.paved_left - cor.left, cor.right - cor.paved_right)
+    assert extra.min() >= 0.0 and extra.max() <= PAVED_REACH + 1e-9
+    assert extra.max() > 0.5  # the outlines leave room beside some turn
+    junction = np.zeros(len(cor.s), dtype=bool)
+    for end, start in zip(cor.edge_ends[:-1], cor.edge_starts[1:], strict=True):
+        junction |= (cor.s >= end - PAVING_PAD - 1.0) & (cor.s <= start + PAVING_PAD + 1.0)
+    assert np.all(extra[~junction] == 0.0)
+    wide = cor.paved()
+    assert wide is not None and wide.paved() is None
+    assert np.all(wide.left >= cor.left) and np.all(wide.right <= cor.right)
+    # a slice keeps them
+    part = cor.slice(100.0, 140.0)
+    assert part.paved_left is not None
+    assert np.allclose(part.paved_left, np.interp(part.s + 100.0, cor.s, cor.paved_left))
+
+
+def test_a_turn_the_lanes_leave_too_tight_is_planned_on_the_junction_outline() -> None:
+    """D3E3 -> E3E2: on its lanes and internal lane no feasible curve turns the car; SUMO's
+    junction outline beside them leaves the room (the corridor's paved sides), and the
+    planner takes it there: feasible, the footprint on the turn's paving (shapely, within
+    :data:`TOL`), and the path, judged from its positions, no tighter than the turning
+    radius (1 % for the three-point circle's sampling error)."""
+    from dataclasses import replace
+
+    from splineplan.network import route_corridor
+    from splineplan.planner import plan_corridor
+
+    net, builder, _ = _net("city")
+    turn = builder.turn("D3E3", "E3E2")
+    p = plan(net, "D3E3", "E3E2", start_pos=turn.start_pos, start_xy=turn.start[:2],
+             start_heading=turn.start[2], end_pos=turn.end_pos)
+    tr = p.trajectory
+    assert tr.feasible, tr.violations
+    x, y = np.asarray(tr.x), np.asarray(tr.y)
+    assert outside(turn, x, y, np.asarray(tr.heading)) <= TOL
+    assert menger_curvature(x, y).max() <= 1.01 / CarShape().min_turn_radius
+    # without the outline's room, the same plan breaks the turning limit
+    lanes_only = replace(p.corridor, paved_left=None, paved_right=None)
+    assert route_corridor(net, p.route).paved() is not None
+    plain = plan_corridor(lanes_only, None, turn.start[:2], turn.start[2]).trajectory
+    assert not plain.feasible
+    assert any(v.kind == "curvature" for v in plain.violations)
+
+
+def test_a_car_on_the_junction_outline_beside_its_lanes_gets_a_plan() -> None:
+    """A car that took a turn's paved room stands with its centre beside the corridor's
+    lanes: between its sides there is no plan from there (level 3 refuses a start off
+    the road), and on the paved corridor there is one, from that pose."""
+    from dataclasses import replace
+
+    from splineplan.errors import SplineplanError
+    from splineplan.network import route_corridor
+    from splineplan.planner import plan_corridor
+
+    net, _, _ = _net("city")
+    cor = route_corridor(net, shortest_route(net, "D3E3", "E3E2"))
+    assert cor.paved_left is not None and cor.paved_right is not None
+    room = np.maximum(cor.paved_left - cor.left, cor.right - cor.paved_right)
+    i = int(np.argmax(room))
+    assert room[i] > 0.5
+    side = 1.0 if cor.paved_left[i] - cor.left[i] >= cor.right[i] - cor.paved_right[i] else -1.0
+    edge = cor.left[i] if side > 0 else cor.right[i]
+    s = float(cor.s[i])
+    xy = cor.to_xy([s], [edge + side * 0.3])[0]
+    heading = float(cor.heading_at(s))
+    with pytest.raises(SplineplanError):
+        plan_corridor(replace(cor, paved_left=None, paved_right=None), None, xy, heading)
+    tr = plan_corridor(cor, None, xy, heading).trajectory
+    assert np.hypot(tr.x[0] - xy[0], tr.y[0] - xy[1]) < 1e-6
