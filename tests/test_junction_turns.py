@@ -65,7 +65,10 @@ CITY_UNDRIVABLE = [("A2A3", "A3B3"), ("D3E3", "E3E2"), ("E0SE", "SED0"), ("F1F2"
 @pytest.mark.parametrize(("a", "b"), CITY_UNDRIVABLE)
 def test_level_1_knows_the_city_turns_no_car_can_make(a: str, b: str) -> None:
     """Each of these turns is undrivable for the 4.5 x 1.8 m car with its 4.2 m turning
-    radius (the oracle finds no path inside the turn's paving), and level 1 knows it."""
+    radius (the oracle finds no path inside the turn's paving at its 5 cm raster), and
+    level 1 knows it. (Two of them, D3E3 -> E3E2 and F2G2 -> G2G1, the planner drives on
+    the paving with less than the raster to spare:
+    :func:`test_a_turn_the_lanes_leave_too_tight_is_planned_on_the_junction_outline`.)"""
     net, builder, _ = _net("city")
     turn = builder.turn(a, b)
     assert not drive(turn.window, [], turn.start, turn.goal, margin=0.0, search=SEARCH).found
@@ -344,7 +347,9 @@ def test_a_turn_the_lanes_leave_too_tight_is_planned_on_the_junction_outline() -
     junction outline beside them leaves the room (the corridor's paved sides), and the
     planner takes it there: feasible, the footprint on the turn's paving (shapely, within
     :data:`TOL`), and the path, judged from its positions, no tighter than the turning
-    radius (1 % for the three-point circle's sampling error)."""
+    radius (1 % for the three-point circle's sampling error). The oracle, whose raster
+    counts a cell partly off the paving as blocked, finds no path here: the turn fits
+    with less than its 5 cm to spare."""
     from dataclasses import replace
 
     from splineplan.network import route_corridor
@@ -359,12 +364,16 @@ def test_a_turn_the_lanes_leave_too_tight_is_planned_on_the_junction_outline() -
     x, y = np.asarray(tr.x), np.asarray(tr.y)
     assert outside(turn, x, y, np.asarray(tr.heading)) <= TOL
     assert menger_curvature(x, y).max() <= 1.01 / CarShape().min_turn_radius
-    # without the outline's room, the same plan breaks the turning limit
+    # without the outline's room, the same plan breaks the turning limit; so it does
+    # when the planner is told to keep to the lanes (a car among traffic)
     lanes_only = replace(p.corridor, paved_left=None, paved_right=None)
     assert route_corridor(net, p.route).paved() is not None
     plain = plan_corridor(lanes_only, None, turn.start[:2], turn.start[2]).trajectory
     assert not plain.feasible
     assert any(v.kind == "curvature" for v in plain.violations)
+    kept = plan_corridor(p.corridor, None, turn.start[:2], turn.start[2],
+                         paving=False).trajectory
+    assert not kept.feasible and np.allclose(kept.x, plain.x)
 
 
 def test_a_car_on_the_junction_outline_beside_its_lanes_gets_a_plan() -> None:
@@ -392,3 +401,5 @@ def test_a_car_on_the_junction_outline_beside_its_lanes_gets_a_plan() -> None:
         plan_corridor(replace(cor, paved_left=None, paved_right=None), None, xy, heading)
     tr = plan_corridor(cor, None, xy, heading).trajectory
     assert np.hypot(tr.x[0] - xy[0], tr.y[0] - xy[1]) < 1e-6
+    with pytest.raises(SplineplanError):  # told to keep to the lanes (the closed loop)
+        plan_corridor(cor, None, xy, heading, paving=False)

@@ -309,10 +309,14 @@ class Replanning(Perception):
                          "it", self.time, self.ego, math.hypot(start[0] - self.pose[0],
                                                                start[1] - self.pose[1]))
                 self.pose = np.array([start[0], start[1], self.pose[2]])
+            # on its lanes, not the junctions' paving beside them: SUMO's drivers see a
+            # vehicle by its lane (taking the paving, more planned vehicles ran into
+            # others in the city's 25 % runs: 38 pairs on ten seeds against 29)
             roadmaps, traj = plan_corridor(
                 window, everything, self.pose[:2], float(self.pose[2]),
                 roadmap_params=sc.roadmap, params=sc.trajectory,
-                start_speed=float(self.v), end_speed=0.0 if final else None)
+                start_speed=float(self.v), end_speed=0.0 if final else None,
+                paving=False)
         except RoadBlockedError as err:
             if moving is not None or in_lane:
                 return False, err
@@ -450,7 +454,7 @@ class Replanning(Perception):
                 roadmaps2, path2 = plan_corridor(
                     window, everything + static, self.pose[:2], float(self.pose[2]),
                     roadmap_params=sc.roadmap, params=sc.trajectory,
-                    start_speed=float(self.v), end_speed=end_speed)
+                    start_speed=float(self.v), end_speed=end_speed, paving=False)
             except SplineplanError as err:
                 log.info("t=%.1f '%s': no path around the plan of '%s' (%s); yielding "
                          "by speed", self.time, self.ego, sp.conflict.obstacle.id, err)
