@@ -481,7 +481,9 @@ def plot_turn(
 
     Returns
     -------
-    The figure; artists with gids ``drivable_area``, ``junction``, ``lanes``,
+    The figure; artists with gids ``drivable_area``, ``paved_area`` (the junctions'
+    paving beside the corridor's lanes, where the corridor knows it), ``junction``,
+    ``lanes``,
     ``internal_lanes``, ``swept``, ``trajectory_speed``, ``violations`` (where the curve
     breaks a limit), ``curvature`` and ``kappa_max``.
     """
@@ -497,6 +499,11 @@ def plot_turn(
     shape = network.junction_shapes.get(jid) if jid is not None else None
     fig = Figure(figsize=(11.0, 5.6), layout="constrained")
     ax, axk = fig.subplots(1, 2, width_ratios=(1.35, 1.0))
+    wide = corridor.paved()
+    if wide is not None:
+        paving = wide.polygon()
+        ax.fill(paving[:, 0], paving[:, 1], color="#dcedc8", zorder=-1, gid="paved_area",
+                label="junction paving, taken where the lanes give no feasible curve")
     area = corridor.polygon()
     ax.fill(area[:, 0], area[:, 1], color="#e3f2fd", zorder=0, gid="drivable_area",
             label="drivable area (the planner's corridor)")

@@ -451,6 +451,11 @@ def test_turn_figure_shows_the_junction_the_curve_and_what_it_breaks(
     assert y0 <= shape[:, 1].min() and shape[:, 1].max() <= y1
     area = next(p for p in ax.patches if p.get_gid() == "drivable_area")
     assert np.allclose(area.get_xy()[:-1], result.corridor.polygon())
+    paved = [p for p in ax.patches if p.get_gid() == "paved_area"]
+    wide = result.corridor.paved()
+    assert bool(paved) == (wide is not None)
+    if wide is not None:
+        assert np.allclose(paved[0].get_xy()[:-1], wide.polygon())
     curve = next(line for line in axk.lines if line.get_gid() == "curvature")
     assert np.allclose(curve.get_ydata(), np.abs(result.trajectory.curvature))
     limit = next(line for line in axk.lines if line.get_gid() == "kappa_max")
