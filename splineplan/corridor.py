@@ -349,16 +349,19 @@ class Corridor:
         A junction's lanes can leave a turn too tight for a car where SUMO's paving
         around them does not: a planner that finds no feasible curve between ``left``
         and ``right`` may try this one."""
+        wide: Corridor | None = self.derived("paved", self._widened)
+        return wide
+
+    def _widened(self) -> Corridor | None:
+        """:meth:`paved`, made once."""
         pl, pr = self.paved_left, self.paved_right
         if pl is None or pr is None:
             return None
         lft, rgt = np.maximum(self.left, pl), np.minimum(self.right, pr)
         if not (np.any(lft - self.left > PAVED_MIN) or np.any(self.right - rgt > PAVED_MIN)):
             return None
-        wide: Corridor = self.derived("paved", lambda: Corridor(
-            self.reference, self.s, lft, rgt, self.edges, self.edge_starts, self.offset,
-            self.keep_left, self.keep_right, self.edge_ends))
-        return wide
+        return Corridor(self.reference, self.s, lft, rgt, self.edges, self.edge_starts,
+                        self.offset, self.keep_left, self.keep_right, self.edge_ends)
 
     def segments(self, length: float, overlap: float = 0.0) -> list[Corridor]:
         """The corridor cut into pieces of at most ``length`` [m] (the last may be shorter).

@@ -130,6 +130,7 @@ def test_a_stop_across_a_lane_line_moves_before_the_lane_change() -> None:
     def stand(where: float, *, u: float = 5.0, v: float = 5.0) -> float:
         me = SimpleNamespace(lane_change=change, u=u, v=v,
                              sc=SimpleNamespace(trajectory=SimpleNamespace(b_max=b)))
+        me._cannot_stop = lambda d: Control._cannot_stop(me, d)  # type: ignore[arg-type]
         return float(Control._before_change(me, where))  # type: ignore[arg-type]
 
     for where in (20.0, 25.0, 29.9):  # in the stretch: before it

@@ -25,7 +25,7 @@ from splineplan.closedloop.bodies import (
 from splineplan.closedloop.cooperate import CROSSING
 from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.errors import SplineplanError
-from splineplan.geometry import FloatArray
+from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.spacetime import box_gap
 from splineplan.sumo.world import LanePlace, Signals
 from splineplan.traffic import first_in_reach, probe_points, safe_speed
@@ -138,6 +138,11 @@ class Control(Perception):
     def _waited_for(self) -> str:
         """The vehicles whose published plans this one waits for, quoted, for ``why_slow``."""
         return ", ".join(f"'{v}'" for v in self.waiting_for)
+
+    def _cannot_stop(self, dist: float) -> bool:
+        """Whether the vehicle can no longer stop within ``dist`` [m] even at its emergency
+        braking."""
+        return self.v * self.v > 2.0 * EMERGENCY_FACTOR * self.sc.trajectory.b_max * dist
 
     def _stand_within(self, dist: float) -> float:
         """Speed cap [m/s] that stands within ``dist`` [m] ahead at the comfortable braking,
@@ -263,7 +268,7 @@ class Control(Perception):
         where its plan waits for another's), it stops :data:`YIELD_STOP` before the
         junction instead, if it still can at its emergency braking; once inside (by the
         route's stations or on SUMO's junction lanes), it goes on."""
-        ego, b = self.sc.ego, self.sc.trajectory.b_max
+        ego = self.sc.ego
         if self.last_lane.startswith(":"):
             return math.inf  # SUMO has it in a junction already
         front = self.station + ego.length / 2.0
@@ -273,7 +278,7 @@ class Control(Perception):
                 continue  # passed, or in it
             if stop <= j_in or stop - ego.length >= j_out:
                 break  # stands before the junction, or behind it
-            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * (j_in - front):
+            if self._cannot_stop(j_in - front):
                 break  # cannot stop before it
             return self._stand_within(j_in - front - YIELD_STOP)
         return math.inf
@@ -317,8 +322,7 @@ class Control(Perception):
         braking goes on."""
         if not self._stop_lines or self.last_lane.startswith(":"):
             return math.inf
-        ego, b = self.sc.ego, self.sc.trajectory.b_max
-        front = self.station + ego.length / 2.0
+        front = self.station + self.sc.ego.length / 2.0
         for line, edge, _ in self._stop_lines:
             if edge in self.stops_done or line < front:
                 continue  # done, or passed
@@ -334,7 +338,7 @@ class Control(Perception):
                     continue
                 return 0.0
             self.stop_since = None
-            if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * (line - front):
+            if self._cannot_stop(line - front):
                 return math.inf  # cannot stop before it
             return self._stand_within(room)
         return math.inf
@@ -410,8 +414,7 @@ class Control(Perception):
         d = centre - o.front
         dist = np.hypot(d[:, 0], d[:, 1])
         toward = d[:, 0] * o.cos + d[:, 1] * o.sin > 0.0
-        turn = np.abs(np.remainder(o.head - float(self.pose[2]) + math.pi, 2.0 * math.pi)
-                      - math.pi)
+        turn = np.abs(wrap_angle(o.head - float(self.pose[2])))
         near = np.flatnonzero(((dist <= radius) | (toward & (dist <= radius + ALLWAY_REACH)))
                               & (turn > CROSSING))
         foes = [j for j in near.tolist() if o.ids[j] not in self.board]
@@ -592,8 +595,7 @@ class Control(Perception):
         along the plan (comfortably, one step early; at once where it is that near
         already), or ``inf`` where the ego cannot stop before it even at its emergency
         braking: it goes on, to clear it."""
-        b = self.sc.trajectory.b_max
-        if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * max(ahead, 0.0):
+        if self._cannot_stop(max(ahead, 0.0)):
             return math.inf
         return self._stand_within(self._before_change(ahead - YIELD_STOP))
 
@@ -610,8 +612,7 @@ class Control(Perception):
         if at <= 0.0 or not at <= stand < ch.end - self.u:
             return stand  # changing already, or standing before or after the change
         before = max(at - YIELD_STOP, 0.0)
-        b = self.sc.trajectory.b_max
-        if self.v * self.v > 2.0 * EMERGENCY_FACTOR * b * before:
+        if self._cannot_stop(before):
             return stand
         return before
 
