@@ -29,6 +29,17 @@ log = logging.getLogger(__name__)
 #: Moves per control point that the steering's smoothing may try (a bound on its time).
 SMOOTH_MOVES = 2
 
+#: Share of the turning limit that :meth:`_Optimiser.ease_bends` aims the curvature at
+#: (below 1: the final curve is sampled more densely than the optimiser's samples).
+BEND_TARGET = 0.985
+#: Control points beyond those shaping a sample over the turning limit, on each side, that
+#: :meth:`_Optimiser.ease_bends` moves too (the bend spreads over them).
+BEND_REACH = 3
+#: Largest move [m] of a control point in :meth:`_Optimiser.ease_bends`.
+BEND_MOVE = 1.5
+#: Step [m] of the finite differences of the footprint's slack.
+_BEND_EPS = 1e-4
+
 #: Room [m] beyond the safety margin that a sideways push of the curve aims for (see
 #: :func:`_push`).
 PUSH_EXTRA = 0.03
@@ -417,6 +428,7 @@ class _Optimiser:
         grev = _greville(knots, k, n)
         order = np.argsort(np.abs(grev[cols] - u[:, None]), axis=1, kind="stable")
         self.cand = np.take_along_axis(cols, order, axis=1)
+        self.pool_index = curve.pool_index
         self.movable = np.ones(n, dtype=bool)
         self.movable[:2] = False  # the start and its heading point
         self.movable[-1] = False
@@ -466,3 +478,159 @@ class _Optimiser:
             self.checker.slack_args())
         log.debug("steering smoothing: %d tried, %d accepted", tried, accepted)
         return int(tried), int(accepted)
+
+    def ease_bends(self, rounds: int) -> int:
+        """Where the curve still turns beyond the turning limit after equation (3)'s
+        single-point moves, move the control points that shape those samples together:
+        the smallest moves (least squares) that bring the curvature to
+        :data:`BEND_TARGET` of the limit while no sample's footprint comes closer to the
+        road's edges or the obstacles than the margins allow (nor closer than it was,
+        where it already did). SLSQP, at most ``rounds`` iterations, on the control points
+        within :data:`BEND_REACH` of those samples' own. The curve gives up separation
+        only to become drivable, as the paper lets smoothing do for speed. Kept if the
+        bend gets gentler and no footprint worse (the whole move, else half or a quarter
+        of it). Returns the iterations taken (0: nothing to do or nothing kept)."""
+        p = self.params
+        bad = np.flatnonzero(self.kappa > p.kappa_max)
+        if rounds <= 0 or len(bad) == 0:
+            return 0
+        n, k = len(self.ctrl), self.k
+        near = np.zeros(n, dtype=bool)
+        for f in np.unique(self.first[bad]):
+            near[max(int(f) - BEND_REACH, 0):int(f) + k + 1 + BEND_REACH] = True
+        # copies of a doubled control point move together (apart, they would make a short
+        # leg, a curvature spike), and only if all of them may move
+        group = self.pool_index
+        held = np.unique(group[~self.movable])
+        touched = np.setdiff1d(np.unique(group[near]), held)
+        pts = np.flatnonzero(np.isin(group, touched))
+        if len(pts) == 0:
+            return 0
+        a, b = int(self.lo[pts].min()), int(self.hi[pts].max())
+        prob = _BendProblem(self, pts, a, b, BEND_TARGET * p.kappa_max)
+        from scipy.optimize import minimize
+
+        res = minimize(prob.objective, np.zeros(prob.size), jac=True, method="SLSQP",
+                       constraints=[{"type": "ineq", "fun": prob.room,
+                                     "jac": prob.room_jacobian}],
+                       bounds=[(-BEND_MOVE, BEND_MOVE)] * prob.size,
+                       options={"maxiter": rounds, "ftol": 1e-4})
+        before = float(self.kappa[a:b].max())
+        for scale in (1.0, 0.5, 0.25):
+            x = res.x * scale
+            kappa, slack, pos, d1, d2 = prob.evaluate(x)
+            if (float(np.abs(kappa).max()) < before
+                    and not np.any(slack < prob.floor - 1e-6)):
+                break
+        else:
+            log.debug("bend easing: %d iterations, nothing kept", res.nit)
+            return 0
+        self.ctrl[:] = prob.moved(x)
+        self.pos[a:b], self.d1[a:b], self.d2[a:b], self.slack[a:b] = pos, d1, d2, slack
+        self.kappa[a:b] = np.abs(kappa)
+        log.debug("bend easing: %d iterations, curvature %.3f -> %.3f 1/m", res.nit, before,
+                  float(self.kappa[a:b].max()))
+        return int(res.nit)
+
+
+class _BendProblem:
+    """:meth:`_Optimiser.ease_bends`' problem: sideways moves ``x`` of the control points
+    ``pts`` (one per group of copies, across the control polygon there) and the samples
+    ``[a, b)`` they shape."""
+
+    def __init__(self, opt: _Optimiser, pts: NDArray[np.int64], a: int, b: int,
+                 target: float) -> None:
+        self.opt, self.pts, self.target = opt, pts, target
+        self.first = opt.first[a:b]
+        self.basis = np.ascontiguousarray(opt.basis[:, :, a:b])
+        self.station = opt.station[a:b]
+        self.floor = np.minimum(opt.slack[a:b], 0.0)  # no footprint gets worse
+        self.ctrl = kernel_floats(opt.ctrl)
+        n, k = len(opt.ctrl), opt.k
+        groups, self.var_of_pt = np.unique(opt.pool_index[pts], return_inverse=True)
+        self.size = len(groups)
+        # across the polygon: normal to the chord between the neighbours of each group
+        ends = np.searchsorted(opt.pool_index, groups, side="right")
+        starts = np.searchsorted(opt.pool_index, groups, side="left")
+        chord = (self.ctrl[np.minimum(ends, n - 1)]
+                 - self.ctrl[np.maximum(starts - 1, 0)])
+        unit = chord / np.maximum(np.hypot(chord[:, 0], chord[:, 1]), 1e-12)[:, None]
+        self.normal = np.column_stack((-unit[:, 1], unit[:, 0]))[self.var_of_pt]  # per pt
+        var = np.full(n, -1)
+        var[pts] = self.var_of_pt
+        # each (sample, slot) shaped by a moved point: its variable and the change of the
+        # sample's position and derivatives per unit of that variable
+        jj, rr = np.nonzero(var[self.first[:, None] + np.arange(k + 1)[None, :]] >= 0)
+        cc = self.first[jj] + rr
+        nrm = np.zeros((n, 2))
+        nrm[pts] = self.normal
+        self.jj, self.gg = jj, var[cc]
+        self.dd = [self.basis[nu, rr, jj][:, None] * nrm[cc] for nu in range(3)]
+        # the same summed per (sample, variable), for the footprint's finite differences
+        key = jj * self.size + self.gg
+        uniq, inv = np.unique(key, return_inverse=True)
+        self.rows, self.owner = uniq // self.size, uniq % self.size
+        self.dp, self.dq = np.zeros((len(uniq), 2)), np.zeros((len(uniq), 2))
+        np.add.at(self.dp, inv, self.dd[0])
+        np.add.at(self.dq, inv, self.dd[1])
+        self._key: bytes | None = None
+        self._value: tuple[FloatArray, ...] = ()
+
+    def moved(self, x: FloatArray) -> FloatArray:
+        """All control points, those in ``pts`` moved by ``x``."""
+        ctrl = self.ctrl.copy()
+        ctrl[self.pts] += x[self.var_of_pt, None] * self.normal
+        return ctrl
+
+    def evaluate(self, x: FloatArray) -> tuple[FloatArray, ...]:
+        """Signed curvature, footprint slack, positions and derivatives at the samples."""
+        key = x.tobytes()
+        if key != self._key:
+            pos, d1, d2 = _evaluate_kernel(self.moved(x), self.first, self.basis, self.opt.k)
+            kappa = curvature_from_derivatives(d1, d2)
+            slack, _ = self.opt.checker.slack(pos, np.arctan2(d1[:, 1], d1[:, 0]),
+                                              self.station)
+            self._key, self._value = key, (kappa, slack, pos, d1, d2)
+        return self._value
+
+    def objective(self, x: FloatArray) -> tuple[float, FloatArray]:
+        """The squared curvature beyond the target plus the squared moves, each in its
+        unit (:data:`_BEND_KAPPA_UNIT`, :data:`_BEND_MOVE_UNIT`), and its gradient (the
+        curvature's derivatives in closed form)."""
+        kappa, _, _, d1, d2 = self.evaluate(x)
+        over = np.maximum(np.abs(kappa) - self.target, 0.0) / _BEND_KAPPA_UNIT
+        sp2 = np.maximum((d1 * d1).sum(axis=1), 1e-12)
+        sp3 = sp2 ** 1.5
+        w = (2.0 * over * np.sign(kappa) / _BEND_KAPPA_UNIT)[self.jj]
+        j = self.jj
+        # d kappa / d (x', y', x'', y'') at each (sample, slot), times the slot's change
+        dk = ((d2[j, 1] / sp3[j] - 3.0 * kappa[j] * d1[j, 0] / sp2[j]) * self.dd[1][:, 0]
+              + (-d2[j, 0] / sp3[j] - 3.0 * kappa[j] * d1[j, 1] / sp2[j]) * self.dd[1][:, 1]
+              - d1[j, 1] / sp3[j] * self.dd[2][:, 0] + d1[j, 0] / sp3[j] * self.dd[2][:, 1])
+        grad = np.bincount(self.gg, w * dk, self.size) + 2.0 * x / _BEND_MOVE_UNIT**2
+        return float(over @ over) + float(x @ x) / _BEND_MOVE_UNIT**2, grad
+
+    def room(self, x: FloatArray) -> FloatArray:
+        """The constraint: each sample's footprint slack above its floor (>= 0)."""
+        return np.asarray(self.evaluate(x)[1] - self.floor)
+
+    def room_jacobian(self, x: FloatArray) -> FloatArray:
+        """:meth:`room`'s derivatives by finite differences, each move's over the samples
+        it shapes only (one footprint check in all)."""
+        _, slack, pos, d1, _ = self.evaluate(x)
+        rows = self.rows
+        p = pos[rows] + _BEND_EPS * self.dp
+        q = d1[rows] + _BEND_EPS * self.dq
+        moved, _ = self.opt.checker.slack(p, np.arctan2(q[:, 1], q[:, 0]), self.station[rows])
+        jac = np.zeros((len(slack), self.size))
+        jac[rows, self.owner] = (moved - slack[rows]) / _BEND_EPS
+        return jac
+
+
+#: Units of :class:`_BendProblem`'s objective: curvature beyond the target [1/m] in
+#: 0.01 1/m, moves [m] in 10 m, so that 0.001 1/m beyond it weighs as much as a move of
+#: 1 m (a penalty: the curvature ends within about that of the target). The scale also
+#: sets how SLSQP's merit function weighs the footprint's constraints; this one (and the
+#: objective 100 times larger or smaller) measured best.
+_BEND_KAPPA_UNIT = 0.01
+_BEND_MOVE_UNIT = 10.0

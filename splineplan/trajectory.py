@@ -346,7 +346,7 @@ def plan_trajectory(
     check_start_speed(start_speed, params)
     obstacles = Obstacles.empty() if obstacles is None else obstacles
     if not polish:
-        params = replace(params, max_iterations=0, repair_rounds=0)
+        params = replace(params, max_iterations=0, repair_rounds=0, bend_rounds=0)
     traj = _plan_polygons(roadmap, corridor, obstacles, params, start_heading, start_speed,
                           end_speed, polish)
     if traj.feasible or not polish or len(roadmap.band_lo) != len(roadmap.s):
@@ -365,24 +365,30 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                    start_speed: float, end_speed: float | None, polish: bool
                    ) -> Trajectory:
     """:func:`plan_trajectory` along one placement of the roadmap's vertices: both control
-    polygons, then the detour."""
+    polygons, then the detour; where none is feasible, those curves again with their
+    bends eased (:meth:`splineplan.optimiser._Optimiser.ease_bends`), least violating
+    first, until one is."""
+    made: list[tuple[Trajectory, Roadmap, dict[str, Any]]] = []
+
+    def attempt(rm: Roadmap, **how: Any) -> Trajectory:
+        tr = _plan_once(rm, corridor, obstacles, params, start_heading, start_speed,
+                        end_speed, **how)
+        made.append((tr, rm, how))
+        return tr
+
     smooth = _sharp_bend(roadmap, corridor, params)
     frame = vertex_frame(roadmap, corridor, params)  # shared by both control polygons
-    traj = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
-                      end_speed, smooth, frame)
+    traj = attempt(roadmap, smooth=smooth, frame=frame)
     if smooth and polish and _too_sharp(traj, params):
         # the curve turns beyond the limit: the smooth polygon keeping its turning vertices
-        other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
-                           end_speed, True, frame, keep_turns=True)
+        other = attempt(roadmap, smooth=True, frame=frame, keep_turns=True)
         traj = _less_violating(traj, other, params)
         if _too_sharp(other, params):
             # and within the whole free intervals, not only the bands
-            other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
-                               end_speed, True, frame, keep_turns=True, free=True)
+            other = attempt(roadmap, smooth=True, frame=frame, keep_turns=True, free=True)
             traj = _less_violating(traj, other, params)
     if polish and (not traj.feasible or _slowed(traj, start_speed)):
-        other = _plan_once(roadmap, corridor, obstacles, params, start_heading, start_speed,
-                           end_speed, not smooth, frame)
+        other = attempt(roadmap, smooth=not smooth, frame=frame)
         if not traj.feasible:
             log.debug("first control polygon gives no feasible curve; the other: %s",
                       other.feasible)
@@ -393,16 +399,28 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                       float(traj.speed[0]), other.feasible, float(other.speed[0]))
             if other.feasible and float(other.speed[0]) > float(traj.speed[0]):
                 traj = other
-    if (traj.feasible or not polish or params.detour_rate <= 0
-            or not _steep(roadmap, params.detour_rate)):
+    if (not traj.feasible and polish and params.detour_rate > 0
+            and _steep(roadmap, params.detour_rate)):
+        detour = detour_roadmap(roadmap, corridor, params.detour_rate)
+        if detour is not None:
+            other = attempt(detour)
+            log.debug("level 2's path gives no feasible curve; detour feasible: %s",
+                      other.feasible)
+            traj = _less_violating(traj, other, params)
+    if traj.feasible or not polish or params.bend_rounds <= 0:
         return traj
-    detour = detour_roadmap(roadmap, corridor, params.detour_rate)
-    if detour is None:
-        return traj
-    other = _plan_once(detour, corridor, obstacles, params, start_heading, start_speed,
-                       end_speed)
-    log.debug("level 2's path gives no feasible curve; detour feasible: %s", other.feasible)
-    return _less_violating(traj, other, params)
+    # the curves made again with their bends eased, least violating first, until one is
+    # feasible
+    for tr, rm, how in sorted(made, key=lambda m: _violation(m[0], params)):
+        if _violation(tr, params)[0] > 0 or not _too_sharp(tr, params):
+            continue  # the footprint too close, or a kink: easing does not mend them
+        other = _plan_once(rm, corridor, obstacles, params, start_heading, start_speed,
+                           end_speed, **how, ease=True)
+        log.debug("no feasible curve; with its bends eased: %s", other.feasible)
+        traj = _less_violating(traj, other, params)
+        if traj.feasible:
+            break
+    return traj
 
 
 def check_start_speed(start_speed: float, params: TrajectoryParams) -> None:
@@ -465,7 +483,7 @@ def _too_sharp(tr: Trajectory, params: TrajectoryParams) -> bool:
 
 
 #: Largest share of the turning limit at which :func:`_plan_polygons` tries the junction
-#: polygon's variants.
+#: polygon's variants and eases a curve's bends.
 NEAR_MISS = 2.5
 
 
@@ -473,11 +491,12 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                params: TrajectoryParams, start_heading: float | None, start_speed: float,
                end_speed: float | None, smooth: bool = False,
                frame: VertexFrame | None = None, keep_turns: bool = False,
-               free: bool = False) -> Trajectory:
+               free: bool = False, ease: bool = False) -> Trajectory:
     """:func:`plan_trajectory` along the roadmap's chosen path (``smooth``: from the
     least-bending control polygon, ``keep_turns``: keeping its turning vertices, ``free``:
     within the free intervals, see :func:`_control_points`; ``frame``: the roadmap's
-    :func:`~splineplan.control_polygon.vertex_frame`, computed here if ``None``)."""
+    :func:`~splineplan.control_polygon.vertex_frame`, computed here if ``None``; ``ease``:
+    with the bends that equation (3) leaves beyond the turning limit eased)."""
     rp = roadmap.params
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
                                    smooth, frame=frame, keep_turns=keep_turns, free=free)
@@ -490,6 +509,8 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     opt = _Optimiser(curve, checker, params, samples)
     kappa_before = opt.kappa.copy()
     tried, accepted, refused, rounds = opt.run()
+    if ease:
+        opt.ease_bends(params.bend_rounds)
     opt.smooth_steering(start_speed)
     stats = IterationStats(tried, accepted, refused, rounds, refinements, len(curve.ctrl),
                            doubled)

@@ -51,6 +51,10 @@ class TrajectoryParams:
         follows from ``min_turn_radius`` (:attr:`max_steering_angle`).
     max_iterations
         Cap on the number of control-point moves tried.
+    bend_rounds
+        Iterations of the joint moves that bring a curve still beyond the turning limit
+        after the single-point moves within it (:meth:`splineplan.optimiser._Optimiser.ease_bends`);
+        0: none.
     patience
         The optimisation also stops after this many rounds in a row that did not raise the
         curve's minimum allowed speed (its objective): the slowest point is then held by a
@@ -98,6 +102,7 @@ class TrajectoryParams:
     lead_in_time: float = 1.5
     band_reserve: float = 0.15
     patience: int = 12
+    bend_rounds: int = 30
     detour_rate: float = 0.4
 
     def __post_init__(self) -> None:
@@ -118,7 +123,7 @@ class TrajectoryParams:
         for name in ("road_margin", "lead_in_lengths", "lead_in_time", "band_reserve",
                      "detour_rate"):
             require_non_negative(f"TrajectoryParams.{name}", getattr(self, name))
-        for name in ("max_iterations", "repair_rounds", "patience"):
+        for name in ("max_iterations", "repair_rounds", "patience", "bend_rounds"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 0:
                 raise ParameterError(f"TrajectoryParams.{name} must be an integer >= 0, "

@@ -218,6 +218,30 @@ def test_a_corner_the_car_can_drive_is_planned_feasible(name: str, a: str, b: st
     assert menger_curvature(x, y).max() <= 1.01 / CarShape().min_turn_radius
 
 
+def test_a_bend_equation_3_leaves_too_sharp_is_eased_within_the_lanes() -> None:
+    """D0E0 -> E0SE: equation (3)'s single-point moves leave the curve turning on 4.0 m at
+    the junction (the plan with ``bend_rounds=0``); moving the control points round the
+    bend together eases it. The plan is feasible, and truly: the footprint stays on the
+    turn's paving (shapely, within :data:`TOL`) and the path, judged from its positions,
+    turns no tighter than the turning radius (1 % for the three-point circle's sampling
+    error)."""
+    from splineplan.trajectory import TrajectoryParams
+
+    net, builder, _ = _net("city")
+    turn = builder.turn("D0E0", "E0SE")
+    kwargs = {"start_pos": turn.start_pos, "start_xy": turn.start[:2],
+              "start_heading": turn.start[2], "end_pos": turn.end_pos}
+    stiff = plan(net, "D0E0", "E0SE", trajectory_params=TrajectoryParams(bend_rounds=0),
+                 **kwargs).trajectory
+    assert not stiff.feasible
+    assert [v.kind for v in stiff.violations] == ["curvature"]
+    tr = plan(net, "D0E0", "E0SE", **kwargs).trajectory
+    assert tr.feasible, tr.violations
+    x, y = np.asarray(tr.x), np.asarray(tr.y)
+    assert outside(turn, x, y, np.asarray(tr.heading)) <= TOL
+    assert menger_curvature(x, y).max() <= 1.01 / CarShape().min_turn_radius
+
+
 def test_the_wedge_between_a_lane_end_and_an_oblique_junction_outline_is_paved() -> None:
     """SUMO cuts a lane square but draws the junction's outline along the other roads'
     kerbs: where they meet at an angle, the benchmark's area paves the wedge between the
@@ -343,22 +367,29 @@ def test_the_paved_sides_reach_beyond_the_lanes_only_round_junctions() -> None:
 
 
 def test_a_turn_the_lanes_leave_too_tight_is_planned_on_the_junction_outline() -> None:
-    """D3E3 -> E3E2: on its lanes and internal lane no feasible curve turns the car; SUMO's
-    junction outline beside them leaves the room (the corridor's paved sides), and the
-    planner takes it there: feasible, the footprint on the turn's paving (shapely, within
-    :data:`TOL`), and the path, judged from its positions, no tighter than the turning
-    radius (1 % for the three-point circle's sampling error). The oracle, whose raster
-    counts a cell partly off the paving as blocked, finds no path here: the turn fits
-    with less than its 5 cm to spare."""
+    """D3E3 -> E3E2, with equation (3)'s single-point moves alone (``bend_rounds=0``): on
+    its lanes and internal lane no feasible curve turns the car; SUMO's junction outline
+    beside them leaves the room (the corridor's paved sides), and the planner takes it
+    there: feasible, the footprint on the turn's paving (shapely, within :data:`TOL`), and
+    the path, judged from its positions, no tighter than the turning radius (1 % for the
+    three-point circle's sampling error). With the bends eased (the default), the lanes
+    leave room enough: the plan keeps within them (shapely) and the turning limit. The
+    oracle, whose raster counts a cell partly off the paving as blocked, finds no path
+    here: the turn fits with less than its 5 cm to spare."""
     from dataclasses import replace
 
+    from shapely.geometry import Polygon
+
+    from benchmarks.turns import footprints
     from splineplan.network import route_corridor
     from splineplan.planner import plan_corridor
+    from splineplan.trajectory import TrajectoryParams
 
     net, builder, _ = _net("city")
     turn = builder.turn("D3E3", "E3E2")
+    stiff = TrajectoryParams(bend_rounds=0)
     p = plan(net, "D3E3", "E3E2", start_pos=turn.start_pos, start_xy=turn.start[:2],
-             start_heading=turn.start[2], end_pos=turn.end_pos)
+             start_heading=turn.start[2], end_pos=turn.end_pos, trajectory_params=stiff)
     tr = p.trajectory
     assert tr.feasible, tr.violations
     x, y = np.asarray(tr.x), np.asarray(tr.y)
@@ -368,12 +399,23 @@ def test_a_turn_the_lanes_leave_too_tight_is_planned_on_the_junction_outline() -
     # when the planner is told to keep to the lanes (a car among traffic)
     lanes_only = replace(p.corridor, paved_left=None, paved_right=None)
     assert route_corridor(net, p.route).paved() is not None
-    plain = plan_corridor(lanes_only, None, turn.start[:2], turn.start[2]).trajectory
+    plain = plan_corridor(lanes_only, None, turn.start[:2], turn.start[2],
+                          params=stiff).trajectory
     assert not plain.feasible
     assert any(v.kind == "curvature" for v in plain.violations)
-    kept = plan_corridor(p.corridor, None, turn.start[:2], turn.start[2],
+    kept = plan_corridor(p.corridor, None, turn.start[:2], turn.start[2], params=stiff,
                          paving=False).trajectory
     assert not kept.feasible and np.allclose(kept.x, plain.x)
+    # the bends eased: within the lanes
+    eased = plan_corridor(lanes_only, None, turn.start[:2], turn.start[2]).trajectory
+    assert eased.feasible, eased.violations
+    x, y, h = np.asarray(eased.x), np.asarray(eased.y), np.asarray(eased.heading)
+    assert menger_curvature(x, y).max() <= 1.01 / CarShape().min_turn_radius
+    lanes = Polygon(lanes_only.polygon()).buffer(1e-6)
+    station = lanes_only.to_sl(np.column_stack((x, y)))[:, 0]
+    inner = (station > 4.5) & (station < lanes_only.length - 4.5)  # the ends overhang
+    assert all(lanes.contains(fp) for fp, ok in zip(footprints(x, y, h, 4.5, 1.8), inner,
+                                                    strict=True) if ok)
 
 
 def test_a_car_on_the_junction_outline_beside_its_lanes_gets_a_plan() -> None:

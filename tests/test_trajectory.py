@@ -664,7 +664,8 @@ def test_detour_where_level_2_zigzags_across_lanes() -> None:
     corridor, obstacles, start = obstacle_field(300, 40, 9.6, 6)
     rm, tr = real_plan(corridor, obstacles, start)
     assert tr.feasible
-    direct = plan_trajectory(rm, corridor, obstacles, TrajectoryParams(detour_rate=0.0), 0.0)
+    direct = plan_trajectory(rm, corridor, obstacles,
+                             TrajectoryParams(detour_rate=0.0, bend_rounds=0), 0.0)
     assert not direct.feasible
     jumps = np.abs(np.diff(rm.l)) / np.diff(rm.s)
     assert jumps.max() > 2.0
@@ -713,6 +714,59 @@ def _random_fields(seed: int, n: int, curved: bool) -> bool | None:
     assert_wheels_keep_up(tr)
     assert tr.min_speed_after >= tr.min_speed_before - 1e-9
     return tr.feasible
+
+
+def _eased_and_stiff(seed: int) -> tuple[Trajectory, Trajectory, Corridor, Obstacles,
+                                          RoadmapParams]:
+    """The benchmark's field ``seed`` (300 m, 40 cars, 9.6 m) planned without the detour,
+    with the bends that equation (3) leaves too sharp eased and without (``bend_rounds=0``).
+    """
+    from benchmarks.fields import obstacle_field
+
+    cor, obs, start = obstacle_field(300, 40, 9.6, seed)
+    rp = RoadmapParams()
+    rm = plan_roadmap(cor, elongate_for_roadmap(cor, obs, rp), start, rp)
+    eased = plan_trajectory(rm, cor, obs, TrajectoryParams(detour_rate=0.0), 0.0)
+    stiff = plan_trajectory(rm, cor, obs, TrajectoryParams(detour_rate=0.0, bend_rounds=0),
+                            0.0)
+    return eased, stiff, cor, obs, rp
+
+
+def _inside(tr: Trajectory) -> float:
+    """How far [m] the footprint comes inside its margins (0: clear)."""
+    return max(tr.safety_margin - float(np.min(tr.clearance_obstacles)),
+               tr.road_margin - float(np.min(tr.clearance_road)), 0.0)
+
+
+@pytest.mark.parametrize("seed", [6, 13, 17, 37, 57])
+def test_easing_the_bends_mends_a_zigzag_without_the_detour(seed: int) -> None:
+    """Fields whose level-2 path crosses lanes between rows of cars faster than the car
+    turns: without the detour, equation (3) leaves the curve too sharp, and moving the
+    control points round those bends together mends it. Feasible, and truly: shapely
+    finds the footprint clear of the grown obstacles and on the road, and the curve within
+    the turning limit."""
+    eased, stiff, cor, obs, rp = _eased_and_stiff(seed)
+    assert not stiff.feasible
+    assert any(v.kind == "curvature" for v in stiff.violations)
+    assert eased.feasible, eased.violations
+    assert shapely_check_corridor(eased, cor, obs, rp) == (0, 0)
+    assert np.abs(eased.curvature).max() <= TrajectoryParams().kappa_max + 1e-9
+    assert_wheels_keep_up(eased)
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1))
+def test_easing_bends_keeps_feasible_curves_and_gives_away_no_room(seed: int) -> None:
+    """A curve feasible without the easing is the same curve with it; otherwise the eased
+    one's footprint comes no further inside its margins, and where it is feasible, shapely
+    finds it clear."""
+    eased, stiff, cor, obs, rp = _eased_and_stiff(seed)
+    if stiff.feasible:
+        assert np.array_equal(eased.x, stiff.x) and np.array_equal(eased.y, stiff.y)
+        return
+    assert _inside(eased) <= _inside(stiff) + 1e-9
+    if eased.feasible:
+        assert shapely_check_corridor(eased, cor, obs, rp) == (0, 0)
 
 
 @settings(max_examples=15, deadline=None)
