@@ -65,3 +65,55 @@ def test_basis_at_unsorted_parameters_matches_scipy() -> None:
     for nu in range(3):
         got = np.stack([(vals[nu] * ctrl[:, d][cols]).sum(axis=0) for d in range(2)], axis=1)
         np.testing.assert_allclose(got, spline(u, nu), rtol=1e-9, atol=1e-9)
+
+
+def test_bend_easing_derivatives_match_finite_differences(monkeypatch: pytest.MonkeyPatch
+                                                          ) -> None:
+    """The bends' easing on a real turn (city D0E0 -> E0SE, whose curve equation (3) leaves
+    beyond the turning limit): its objective's gradient in closed form and its
+    constraints' finite-difference Jacobian agree with central differences, at random
+    small moves of the control points; and the moves it keeps are sideways, the same for
+    copies of a control point."""
+    from pathlib import Path
+
+    from benchmarks.turns import TurnBuilder
+    from splineplan import optimiser
+    from splineplan.network import load_network
+    from splineplan.pipeline import plan
+
+    seen: list[optimiser._BendProblem] = []
+    init = optimiser._BendProblem.__init__
+
+    def spy(self: optimiser._BendProblem, *args: object, **kwargs: object) -> None:
+        init(self, *args, **kwargs)  # type: ignore[arg-type]
+        seen.append(self)
+
+    monkeypatch.setattr(optimiser._BendProblem, "__init__", spy)
+    path = Path(__file__).resolve().parents[1] / "sumo_nets" / "city.net.xml"
+    net, turn = load_network(path), TurnBuilder(path).turn("D0E0", "E0SE")
+    tr = plan(net, "D0E0", "E0SE", start_pos=turn.start_pos, start_xy=turn.start[:2],
+              start_heading=turn.start[2], end_pos=turn.end_pos).trajectory
+    assert tr.feasible and seen
+    rng = np.random.default_rng(0)
+    for prob in seen:
+        # each moved point moves along a unit normal, copies (equal pool index) alike
+        np.testing.assert_allclose(np.hypot(*prob.normal.T), 1.0, atol=1e-9)
+        x = rng.normal(0.0, 0.05, prob.size)
+        _, grad = prob.objective(x)
+        h = 1e-6
+        num = np.array([(prob.objective(x + h * e)[0] - prob.objective(x - h * e)[0])
+                        / (2 * h) for e in np.eye(prob.size)])
+        np.testing.assert_allclose(grad, num, rtol=1e-4, atol=1e-6 * np.abs(num).max())
+        jac = prob.room_jacobian(x)
+        h = 1e-5
+        num = np.column_stack([(prob.room(x + h * e) - prob.room(x - h * e)) / (2 * h)
+                               for e in np.eye(prob.size)])
+        # the footprint's slack is piecewise smooth (its nearest corner can switch)
+        close = np.isclose(jac, num, rtol=1e-2, atol=1e-3)
+        assert close.mean() > 0.99
+        moved = prob.moved(x) - prob.ctrl
+        np.testing.assert_allclose(np.delete(moved, prob.pts, axis=0), 0.0)
+        group = prob.opt.pool_index[prob.pts]
+        for g in np.unique(group):
+            rows = moved[prob.pts[group == g]]
+            np.testing.assert_allclose(rows, rows[:1].repeat(len(rows), axis=0))
