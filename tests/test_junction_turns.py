@@ -41,8 +41,9 @@ def _net(name: str) -> tuple[RoadNetwork, TurnBuilder, list[tuple[str, str]]]:
 def test_a_feasible_junction_turn_stays_on_the_paving(name: str, k: int) -> None:
     """A random junction turn of the bundled networks, planned from the benchmark's start
     pose: where the trajectory says it is feasible, the footprint along it stays inside the
-    turn's paving (shapely); the pipeline keeps the turn unless level 1 finds it too tight
-    for the car."""
+    turn's paving (shapely) and the path, judged from its positions, turns no tighter than
+    the turning radius (1 % for the three-point circle's sampling error); the pipeline
+    keeps the turn unless level 1 finds it too tight for the car."""
     net, builder, turns = _net(name)
     a, b = turns[k % len(turns)]
     turn = builder.turn(a, b)
@@ -50,8 +51,9 @@ def test_a_feasible_junction_turn_stays_on_the_paving(name: str, k: int) -> None
              start_heading=turn.start[2])
     tr = p.trajectory
     if tr.feasible:
-        assert outside(turn, np.asarray(tr.x), np.asarray(tr.y),
-                       np.asarray(tr.heading)) <= TOL
+        x, y = np.asarray(tr.x), np.asarray(tr.y)
+        assert outside(turn, x, y, np.asarray(tr.heading)) <= TOL
+        assert menger_curvature(x, y).max() <= 1.01 / CarShape().min_turn_radius
     if turn_fits(net, a, b, "passenger", CarShape()):
         assert p.route.edges == (a, b)
 
