@@ -508,6 +508,10 @@ class _Optimiser:
             return 0
         a, b = int(self.lo[pts].min()), int(self.hi[pts].max())
         prob = _BendProblem(self, pts, a, b, BEND_TARGET * p.kappa_max)
+        f0, g0 = prob.objective(np.zeros(prob.size))
+        if not (np.isfinite(f0) and np.all(np.isfinite(g0))
+                and np.all(np.isfinite(prob.room(np.zeros(prob.size))))):
+            return 0  # a cusp (zero speed along the curve): nothing to ease smoothly
         from scipy.optimize import minimize
 
         res = minimize(prob.objective, np.zeros(prob.size), jac=True, method="SLSQP",
