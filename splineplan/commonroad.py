@@ -99,9 +99,6 @@ MOVING_MARGIN = 0.2
 #: How far [m] beyond the goal the corridor runs (the goal lanelets' successors), so
 #: that the curve does not end on the goal's edge.
 RUN_ON = 40.0
-#: Room [m] the car's front keeps from the end of a road that ends (a dead end, or the
-#: scenario's edge), where a plan that misses its goal stops.
-ROAD_END_GAP = 0.3
 #: How far inside the goal's lateral extent [m] the vehicle's centre keeps where it passes
 #: the goal (see :func:`goal_keep`), and how fast that band widens away from it [m/m].
 GOAL_INSET = 0.2
@@ -954,12 +951,12 @@ def _moving(scenario: Any) -> list[Any]:
 
 def _short_of_end(corridor: Corridor, car: Vehicle) -> Corridor:
     """The corridor of a road that ends, cut so that the car stopping at its end keeps its
-    front :data:`ROAD_END_GAP` inside the road (unless that leaves less than a car length):
+    front :data:`~splineplan.corridor.ROAD_END_GAP` inside the road (unless that leaves
+    less than a car length):
     CommonRoad's body is centred ``b`` ahead of the rear axle, the planner's centre half the
     wheelbase."""
-    front = car.length / 2.0 + max(car.reference_ahead, 0.0)
-    cut = corridor.length - front - ROAD_END_GAP
-    return corridor.slice(0.0, cut) if cut > car.length else corridor
+    return corridor.short_of_end(car.length / 2.0 + max(car.reference_ahead, 0.0),
+                                 least=car.length)
 
 
 def _run_on(network: Any, route: LaneletRoute) -> LaneletRoute:

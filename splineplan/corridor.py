@@ -42,6 +42,9 @@ UNBOUNDED = 1e9
 #: Room [m] beyond a corridor's sides below which its paved offsets count as none
 #: (:meth:`Corridor.paved`).
 PAVED_MIN = 0.05
+#: Room [m] the car's front keeps from the end of a road that ends (a dead end, or a
+#: scenario's last lanelet), where a plan stops there (:meth:`Corridor.short_of_end`).
+ROAD_END_GAP = 0.3
 
 
 @dataclass(frozen=True, eq=False)
@@ -315,6 +318,15 @@ class Corridor:
             pl, pr = np.interp(ss, self.s, self.paved_left), np.interp(ss, self.s, self.paved_right)
         return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr, ends,
                         pl, pr)
+
+    def short_of_end(self, front: float, least: float, gap: float = ROAD_END_GAP
+                     ) -> Corridor:
+        """The corridor of a road that ends, cut so that a car whose front is ``front``
+        [m] ahead of its centre, stopping at the cut, keeps its front ``gap`` [m] inside
+        the road; unchanged where the cut would come at station ``least`` [m] or before
+        (a car that close to the end gets the road up to it)."""
+        cut = self.length - front - gap
+        return self.slice(0.0, cut) if cut > least else self
 
     def extend_back(self, length: float) -> Corridor:
         """The corridor with ``length`` [m] more before its start, straight along its first

@@ -286,6 +286,13 @@ class RoadNetwork:
                                                             vclass=vclass)}
         return "w" if "w" in states else "s" if "s" in states else ""
 
+    def dead_end(self, edge_id: str) -> bool:
+        """Whether the road ends with edge ``edge_id``: no connection leaves it but
+        turnarounds (a dead end's), which a car driving forward cannot take."""
+        i = self.edge_index(edge_id)
+        lo, hi = np.searchsorted(self._conn_from, [i, i + 1])
+        return all(self.connections[k].direction == "t" for k in range(int(lo), int(hi)))
+
     def connections_between(self, from_edge: str, to_edge: str, *,
                             vclass: str | None = None) -> tuple[Connection, ...]:
         """Connections from ``from_edge`` to ``to_edge``, only those ``vclass`` may use if given."""

@@ -116,7 +116,9 @@ def plan(
     end_pos
         Position [m] along ``to_edge`` where the plan ends, as SUMO's ``arrivalPos``
         (default: the edge's end). On a route of one edge it must lie ahead of
-        ``start_pos``.
+        ``start_pos``. Where no connection leaves ``to_edge`` (a dead end), the plan
+        ends at the latest where the car's front keeps
+        :data:`~splineplan.corridor.ROAD_END_GAP` from the road's end.
     vclass, weight, avoid
         As for :func:`splineplan.route.shortest_route`.
     roadmap_params, trajectory_params
@@ -157,12 +159,18 @@ def plan(
             raise RoadBlockedError(f"{last}; no other route: {err}", station=last.station,
                                    edge=last.edge, junction=last.junction) from err
         corridor = route_corridor(network, route, vclass=vclass)
-        if end_pos is not None:
-            corridor = corridor.slice(0.0, end_station(network, corridor, end_pos))
-        back = {(route.edges[i], route.edges[i + 1]) for i in turnarounds(network, route)}
-        t_route += time.perf_counter() - t0
         xy = (corridor.to_xy(start_pos, 0.0) if start_xy is None
               else np.asarray(start_xy, dtype=float).reshape(2))
+        end = corridor.length if end_pos is None else end_station(network, corridor, end_pos)
+        if network.dead_end(to_edge):
+            # the car stops before a road that ends, its front inside
+            end = min(end, corridor.short_of_end(
+                rp.vehicle_length / 2.0,
+                least=float(corridor.to_sl(xy)[0, 0]) + rp.vehicle_length).length)
+        if end_pos is not None or end < corridor.length:
+            corridor = corridor.slice(0.0, end)
+        back = {(route.edges[i], route.edges[i + 1]) for i in turnarounds(network, route)}
+        t_route += time.perf_counter() - t0
         heading = (float(corridor.heading_at(corridor.to_sl(xy)[0, 0]))
                    if start_heading is None else start_heading)
         try:

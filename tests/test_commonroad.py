@@ -20,6 +20,8 @@ import numpy as np
 import pytest
 from conftest import ROOT
 
+from splineplan.corridor import ROAD_END_GAP
+
 cr = pytest.importorskip("splineplan.commonroad")
 pytest.importorskip("commonroad_dc.feasibility.feasibility_checker",
                     reason="commonroad-drivability-checker is a test extra")
@@ -324,4 +326,4 @@ def test_a_plan_that_misses_its_goal_stops_inside_the_road(
     assert cert.road_compliant and cert.collision_free and not cert.goal_reached
     end = net.find_lanelet_by_id(res.route.chain[-1]).center_vertices[-1]
     front = _ks_boxes(res)[-1]
-    assert front.distance(shapely.Point(end)) >= cr.ROAD_END_GAP - 0.05
+    assert front.distance(shapely.Point(end)) >= ROAD_END_GAP - 0.05

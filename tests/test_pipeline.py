@@ -14,6 +14,7 @@ import sumolib
 from conftest import GRID_TURNS
 
 from splineplan.cli import main
+from splineplan.corridor import ROAD_END_GAP
 from splineplan.network import load_network, read_obstacles, route_corridor
 from splineplan.obstacles import Obstacles
 from splineplan.pipeline import plan
@@ -65,6 +66,32 @@ def test_plan_ends_at_the_arrival_position_sumolib_places(grid, end_pos: float) 
     assert result.corridor.length < whole.corridor.length - (129.2 - end_pos) + 5.0
     # the same route, only shorter
     assert result.route == whole.route
+
+
+@pytest.mark.parametrize("end_pos", [None, 70.0])
+def test_a_plan_to_a_dead_end_stops_with_the_front_inside_the_road(end_pos) -> None:
+    """``e2`` of the straight network ends at a dead end (sumolib: its only way on is
+    the turnaround): the car stops with its front bumper ``ROAD_END_GAP`` short of the
+    lane's end, not with its centre there; an arrival position well before it holds."""
+    net = load_network(NETS / "straight.net.xml")
+    edge = sumolib.net.readNet(str(NETS / "straight.net.xml"),
+                               withInternal=True).getEdge("e2")
+    assert all(c.getDirection() == "t" for c in edge.getOutgoing() for c in
+               edge.getConnections(c)) and net.dead_end("e2") and not net.dead_end("e1")
+    result = plan(net, "e0", "e2", end_pos=end_pos)
+    tr = result.trajectory
+    assert tr.feasible and tr.speed[-1] == pytest.approx(0.0, abs=1e-6)
+    shape = np.asarray(edge.getLanes()[0].getShape())
+    along = (shape[-1] - shape[-2]) / np.hypot(*(shape[-1] - shape[-2]))
+    front = np.array([tr.x[-1], tr.y[-1]]) + 2.25 * np.array(
+        [np.cos(tr.heading[-1]), np.sin(tr.heading[-1])])
+    to_end = float((shape[-1] - front) @ along)
+    if end_pos is None:
+        # the gap, to the corridor's sampling (a few centimetres)
+        assert ROAD_END_GAP - 0.05 <= to_end <= ROAD_END_GAP + 0.5
+    else:
+        goal = np.asarray(sumolib.geomhelper.positionAtShapeOffset(shape.tolist(), end_pos))
+        assert abs(float((np.array([tr.x[-1], tr.y[-1]]) - goal) @ along)) < 1.0
 
 
 def test_plan_refuses_an_arrival_position_off_the_edge_or_behind_the_start(grid) -> None:
