@@ -1,6 +1,6 @@
 """Feasible plans on seeded random routes: how often levels 1-3 give a trajectory a car can drive.
 
-``python -m benchmarks feasible [--routes N] [--seed S] [--nets city grid monaco]``.
+``python -m benchmarks feasible [--routes N] [--seed S] [--nets city grid monaco] [--place]``.
 Random pairs of edges the passenger class may use, routed without turnarounds
 (:func:`splineplan.route.shortest_route`); kept when the route is 0.3-3 km long on the
 bundled networks and 0.5-3 km on Monaco (``../shared/data``, skipped when absent), and when
@@ -23,15 +23,19 @@ from pathlib import Path
 from benchmarks.routes import LONGEST, NETS, random_routes
 
 
-def bench_network(path: Path, shortest: float, n_routes: int, seed: int) -> dict[str, int]:
-    """Plan ``n_routes`` random routes on one network; print and return the counts."""
+def bench_network(path: Path, shortest: float, n_routes: int, seed: int,
+                  place: bool = False) -> dict[str, int]:
+    """Plan ``n_routes`` random routes on one network (``place``: level 2 places the
+    vertices, ``RoadmapParams(place=True)``); print and return the counts."""
     from splineplan.network import load_network
+    from splineplan.roadmap import RoadmapParams
 
     net = load_network(path)
     counts = collections.Counter[str]()
     broken = collections.Counter[str]()
     t0 = time.perf_counter()
-    for r in random_routes(net, n_routes, seed, shortest):
+    for r in random_routes(net, n_routes, seed, shortest,
+                           roadmap_params=RoadmapParams(place=place)):
         counts["routes"] += 1
         if r.plan is None:
             broken[f"error ({type(r.error).__name__})"] += 1
@@ -61,6 +65,8 @@ def main(argv: list[str]) -> int:
                     help="routes per network (20 on city and grid, 100 on Monaco)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--nets", nargs="+", default=list(NETS), choices=list(NETS))
+    ap.add_argument("--place", action="store_true",
+                    help="level 2 places the vertices (RoadmapParams(place=True))")
     args = ap.parse_args(argv)
     logging.disable(logging.WARNING)  # the pipeline's warnings about tight turns
     for name in args.nets:
@@ -69,7 +75,7 @@ def main(argv: list[str]) -> int:
             print(f"{name}: {path} not found, skipped")
             continue
         bench_network(path, shortest, args.routes or (100 if name == "monaco" else 20),
-                      args.seed)
+                      args.seed, args.place)
     return 0
 
 

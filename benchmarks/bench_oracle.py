@@ -1,6 +1,6 @@
 """Levels 2 and 3 judged by the kinematic oracle on random obstacle fields.
 
-``python -m benchmarks oracle [--fields N] [--seed S]``. Each field is a straight or
+``python -m benchmarks oracle [--fields N] [--seed S] [--place]``. Each field is a straight or
 curved road of 2 to 4 lanes with parked cars, trucks and cones; the vehicle starts at
 10 m/s with ``s_max`` 15 m/s. The planner (:func:`splineplan.planner.plan_corridor`) is
 compared with the oracle (:mod:`benchmarks.kinematic_oracle`: hybrid A* with the car's
@@ -83,9 +83,11 @@ def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(prog="python -m benchmarks oracle")
     ap.add_argument("--fields", type=int, default=30)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--place", action="store_true",
+                    help="level 2 places the vertices (RoadmapParams(place=True))")
     args = ap.parse_args(argv)
     rng = np.random.default_rng(args.seed)
-    rp = RoadmapParams()
+    rp = RoadmapParams(place=args.place)
     tp = TrajectoryParams(s_max=15.0)
     search = Search(step=0.05)
     rows = []

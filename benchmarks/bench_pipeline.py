@@ -6,7 +6,7 @@ two lanes or more, so no road is closed), and times level 1, 2 and 3 and their s
 the Monaco network of ../shared/data when present, else on a generated grid (netgenerate),
 and prints medians and how the time grows with route length and obstacle count.
 
-``python -m benchmarks pipeline`` or ``python -m benchmarks.bench_pipeline [--routes N]``
+``python -m benchmarks pipeline`` or ``python -m benchmarks.bench_pipeline [--routes N] [--place]``
 """
 
 from __future__ import annotations
@@ -45,11 +45,14 @@ def parked_cars(net: Any, route: Any, spacing: float, rng: random.Random) -> Any
     return Obstacles.from_boxes(np.array(pos), np.array(head), 4.5, 1.8)
 
 
-def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[str, float]:
-    """Time the pipeline on ``n_routes`` routes of about 2 km; print and return medians."""
+def bench_network(path: Path, n_routes: int, seed: int, spacing: float,
+                  place: bool = False) -> dict[str, float]:
+    """Time the pipeline on ``n_routes`` routes of about 2 km (``place``: level 2 places
+    the vertices); print and return medians."""
     from splineplan.errors import SplineplanError
     from splineplan.network import load_network
     from splineplan.pipeline import plan, turnarounds
+    from splineplan.roadmap import RoadmapParams
     from splineplan.route import shortest_route
 
     net = load_network(path)
@@ -73,7 +76,7 @@ def bench_network(path: Path, n_routes: int, seed: int, spacing: float) -> dict[
         times = []
         try:
             for _ in range(3):
-                p = plan(net, a, b, obstacles)
+                p = plan(net, a, b, obstacles, roadmap_params=RoadmapParams(place=place))
                 times.append((p.total_seconds, p.route_seconds, p.roadmap_seconds,
                               p.trajectory_seconds))
         except SplineplanError as err:
@@ -125,16 +128,18 @@ def main(argv: list[str]) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--spacing", type=float, default=50.0,
                     help="metres of route per parked car (50)")
+    ap.add_argument("--place", action="store_true",
+                    help="level 2 places the vertices (RoadmapParams(place=True))")
     args = ap.parse_args(argv)
     if MONACO.exists():
-        bench_network(MONACO, args.routes, args.seed, args.spacing)
+        bench_network(MONACO, args.routes, args.seed, args.spacing, args.place)
     else:
         print(f"Monaco network not found at {MONACO}: using a generated grid")
     with tempfile.TemporaryDirectory() as tmp:
         grid = _grid(Path(tmp))
         for spacing in (100.0, args.spacing, args.spacing / 2.0):
             print(f"-- grid, one parked car per {spacing:.0f} m")
-            bench_network(grid, args.routes, args.seed, spacing)
+            bench_network(grid, args.routes, args.seed, spacing, args.place)
     return 0
 
 

@@ -43,9 +43,11 @@ class RandomRoute:
 
 
 def random_routes(net: Any, n_routes: int, seed: int, shortest: float,
-                  longest: float = LONGEST) -> Iterator[RandomRoute]:
+                  longest: float = LONGEST, roadmap_params: Any = None
+                  ) -> Iterator[RandomRoute]:
     """Up to ``n_routes`` seeded random routes of ``shortest``-``longest`` [m] on ``net``
-    (a :class:`~splineplan.network.RoadNetwork`) that need no turnaround, in draw order."""
+    (a :class:`~splineplan.network.RoadNetwork`) that need no turnaround, in draw order,
+    planned with ``roadmap_params`` (default: level 2's defaults)."""
     from splineplan.errors import SplineplanError
     from splineplan.pipeline import plan, turnarounds
     from splineplan.route import shortest_route
@@ -63,7 +65,7 @@ def random_routes(net: Any, n_routes: int, seed: int, shortest: float,
         if not shortest <= length <= longest:
             continue
         try:
-            p = plan(net, a, b)
+            p = plan(net, a, b, roadmap_params=roadmap_params)
         except SplineplanError as err:
             found += 1
             yield RandomRoute(a, b, length, None, err)

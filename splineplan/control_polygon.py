@@ -116,8 +116,9 @@ def _free_intervals(roadmap: Roadmap, distinct: NDArray[np.bool_],
     lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
     hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
     if len(roadmap.band_lo) == len(path):
-        lo = np.maximum(lo, np.asarray(roadmap.band_lo, dtype=float)[distinct])
-        hi = np.minimum(hi, np.asarray(roadmap.band_hi, dtype=float)[distinct])
+        # the band (which may reach into the road margin beside an obstacle)
+        lo = np.asarray(roadmap.band_lo, dtype=float)[distinct]
+        hi = np.asarray(roadmap.band_hi, dtype=float)[distinct]
     # never narrower than the band (the band reserve may move a vertex off its interval)
     return np.column_stack((np.minimum(lo, band[:, 0]), np.maximum(hi, band[:, 1])))
 
@@ -679,6 +680,10 @@ def _vertex_lines(roadmap: Roadmap, corridor: Corridor, distinct: NDArray[np.boo
     if len(path) == len(distinct) and len(roadmap.graph_lo) and len(roadmap.graph_hi):
         lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
         hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
+        if len(roadmap.band_lo) == len(path):
+            # beside an obstacle, placement may take the road margin: the interval with it
+            lo = np.minimum(lo, np.asarray(roadmap.band_lo, dtype=float)[distinct])
+            hi = np.maximum(hi, np.asarray(roadmap.band_hi, dtype=float)[distinct])
         # the vertex, moved off its interval's ends by the reserve where it can
         q = np.minimum(band_reserve, (hi - lo) / 2.0)
         centre = np.clip(sl[:, 1], lo + q, hi - q)
@@ -882,7 +887,8 @@ def detour_roadmap(roadmap: Roadmap, corridor: Corridor, rate: float) -> Roadmap
     return replace(roadmap, xy=xy, s=st.copy(), l=lat, width=width,
                    bottleneck_width=float(width[j]), bottleneck_index=j,
                    length=float(polyline_stations(xy)[-1]), path=path,
-                   links=np.zeros((0, 2, 2)), band_lo=np.zeros(0), band_hi=np.zeros(0))
+                   links=np.zeros((0, 2, 2)), band_lo=np.zeros(0), band_hi=np.zeros(0),
+                   separation=np.zeros(0))
 
 
 @njit(cache=True)

@@ -286,11 +286,14 @@ def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
              first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
              hi: NDArray[np.int64], cand: NDArray[np.int64], movable: NDArray[np.bool_],
              refused: NDArray[np.bool_], k: int, kappa_smax: float, kappa_max: float,
-             max_iterations: int, patience: int, checker: tuple[Any, ...]
+             max_iterations: int, patience: int, floor: FloatArray,
+             checker: tuple[Any, ...]
              ) -> tuple[int, int, int, int]:  # pragma: no cover - compiled
     """:meth:`splineplan.optimiser._Optimiser.run` on the optimiser's arrays, changed in
-    place (the best curve seen at the end); ``checker``: the footprint check's arrays and
-    sizes, as :func:`footprint_slack` takes them after the samples."""
+    place (the best curve seen at the end); ``floor`` ``(m,)`` [m]: the clearance from
+    the obstacles beyond the safety margin below which no move brings a sample that kept
+    it (:func:`separation_kept`); ``checker``: the footprint check's arrays and sizes, as
+    :func:`footprint_slack` takes them after the samples."""
     n = len(ctrl)
     tried = accepted = refused_count = rounds = 0
     best_worst = kappa.max()
@@ -324,7 +327,7 @@ def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
         rounds += 1
         tried += len(chosen)
         acc = try_moves(chosen, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
-                         hi, kappa_max, checker)
+                         hi, kappa_max, floor, checker)
         n_acc = int(acc.sum())
         accepted += n_acc
         refused_count += len(chosen) - n_acc
@@ -360,13 +363,15 @@ def optimise(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: FloatArray,
 def try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
               d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
               first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
-              hi: NDArray[np.int64], kappa_max: float, checker: tuple[Any, ...]
+              hi: NDArray[np.int64], kappa_max: float, floor: FloatArray,
+              checker: tuple[Any, ...]
               ) -> NDArray[np.bool_]:  # pragma: no cover - compiled
     """Try moving each control point in ``moves`` to its neighbours' mean; a move changes
     the samples linearly (new = old + basis column * delta), so only its stretch is
-    re-evaluated. Kept, in place, if no clear sample of the stretch loses its clearance
-    and the stretch's worst curvature (beyond the limit) and footprint violation do not
-    grow. Returns which moves were kept."""
+    re-evaluated. Kept, in place, if no clear sample of the stretch loses its clearance,
+    none comes below its separation ``floor`` from the obstacles where it kept it
+    (:func:`separation_kept`), and the stretch's worst curvature (beyond the limit) and
+    footprint violation do not grow. Returns which moves were kept."""
     acc = np.zeros(len(moves), dtype=np.bool_)
     for m in range(len(moves)):
         i = moves[m]
@@ -397,6 +402,8 @@ def try_moves(moves: NDArray[np.int64], ctrl: FloatArray, pos: FloatArray, d1: F
         sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
         if not footprint_kept(slack, sl, a, 0.0):
             continue
+        if not separation_kept(pos, d1, a, px, py, head, floor, checker):
+            continue
         acc[m] = True
         apply_move(i, dx, dy, a, ctrl, pos, d1, d2, kappa, slack, station, px, py, e1, e2,
                    kap, sl, sc)
@@ -416,6 +423,39 @@ def footprint_kept(slack: FloatArray, sl: FloatArray, a: int, room: float
             return False
         new_v, old_v = max(new_v, -sl[t]), max(old_v, -slack[j])
     return new_v <= old_v + 1e-12
+
+
+@njit(cache=True, inline="always")  # as try_moves
+def separation_kept(pos: FloatArray, d1: FloatArray, a: int, px: FloatArray,
+                    py: FloatArray, head: FloatArray, floor: FloatArray,
+                    checker: tuple[Any, ...]) -> bool:  # pragma: no cover - compiled
+    """Whether the new poses ``px, py, head`` of samples ``a ..`` keep the separation
+    from the obstacles: none whose footprint kept ``floor[j]`` [m] beyond the safety
+    margin from every obstacle comes below it (the obstacles alone: a sample beside the
+    road's edge keeps little from the road and may still keep its separation)."""
+    q = len(px)
+    top = 0.0
+    for t in range(q):
+        top = max(top, floor[a + t])
+    if top <= 0.0:
+        return True
+    # the checker's obstacle part and the footprint's half sizes (footprint_slack's order)
+    vx, vy, offsets, bbox, margin = checker[-5], checker[-4], checker[-3], checker[-2], \
+        checker[-1]
+    hl, hw = checker[13], checker[14]
+    ox, oy, oh = np.empty(q), np.empty(q), np.empty(q)
+    for t in range(q):
+        ox[t], oy[t] = pos[a + t, 0], pos[a + t, 1]
+        oh[t] = np.arctan2(d1[a + t, 1], d1[a + t, 0])
+    old = obstacle_clearance(ox, oy, oh, vx, vy, offsets, bbox, hl, hw, margin, top,
+                             np.bool_(True))
+    new = obstacle_clearance(px, py, head, vx, vy, offsets, bbox, hl, hw, margin, top,
+                             np.bool_(True))
+    for t in range(q):
+        need = floor[a + t] + margin
+        if floor[a + t] > 0.0 and old[t] >= need and new[t] < need:
+            return False
+    return True
 
 
 @njit(cache=True, inline="always")  # as try_moves
@@ -525,7 +565,7 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
                     hi: NDArray[np.int64], cand: NDArray[np.int64],
                     movable: NDArray[np.bool_], k: int, wheelbase: float, rate: float,
                     mu_g: float, s_max: float, kappa_cap: float, a_max: float,
-                    b_max: float, start_speed: float, max_moves: int,
+                    b_max: float, start_speed: float, max_moves: int, floor: FloatArray,
                     checker: tuple[Any, ...]
                     ) -> tuple[int, int]:  # pragma: no cover - compiled
     """Smooth the curve where the steering rate, not the curvature, sets its speed: rounds
@@ -535,10 +575,11 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
     without undoing the turn (:func:`_smooth_move`: a move is kept if the lowest speed limit
     of its stretch rises and neither its curvature beyond the limit nor its footprint's
     clearance gets worse, nor comes within :data:`SMOOTH_ROOM` of the margins where it was
-    not). ``kappa_cap`` [1/m]: the curvature that no move may raise a sample beyond unless
-    it was there already (the worst bend's, at most the turning limit's, at least the one
-    that still allows ``s_max``: smoothing never sharpens the worst bend). Returns the
-    moves tried and accepted."""
+    not, nor below ``floor`` where it kept it, as in :func:`optimise`). ``kappa_cap``
+    [1/m]: the curvature that no move may raise a sample beyond unless it was there
+    already (the worst bend's, at most the turning limit's, at least the one that still
+    allows ``s_max``: smoothing never sharpens the worst bend). Returns the moves tried
+    and accepted."""
     n, m = len(ctrl), len(kappa)
     tried = accepted = 0
     refused = np.zeros(n, dtype=np.bool_)
@@ -578,7 +619,7 @@ def smooth_steering(ctrl: FloatArray, pos: FloatArray, d1: FloatArray, d2: Float
         idle += 1
         for i in chosen:
             if _smooth_move(i, ctrl, pos, d1, d2, kappa, slack, station, first, basis, lo,
-                            hi, wheelbase, rate, mu_g, s_max, kappa_cap, checker):
+                            hi, wheelbase, rate, mu_g, s_max, kappa_cap, floor, checker):
                 accepted += 1
                 changed = True
                 idle = 0
@@ -623,8 +664,8 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
                  d2: FloatArray, kappa: FloatArray, slack: FloatArray, station: FloatArray,
                  first: NDArray[np.int64], basis: FloatArray, lo: NDArray[np.int64],
                  hi: NDArray[np.int64], wheelbase: float, rate: float, mu_g: float,
-                 s_max: float, kappa_cap: float, checker: tuple[Any, ...]
-                 ) -> bool:  # pragma: no cover - compiled
+                 s_max: float, kappa_cap: float, floor: FloatArray,
+                 checker: tuple[Any, ...]) -> bool:  # pragma: no cover - compiled
     """One move of :func:`smooth_steering`: towards one of :func:`_smooth_targets`, the
     whole way or part of it (in the order of :data:`SMOOTH_STEPS`), the first that raises
     the lowest speed limit of the stretch, keeps its curvature and keeps its footprint
@@ -693,6 +734,8 @@ def _smooth_move(i: int, ctrl: FloatArray, pos: FloatArray, d1: FloatArray,
             head[t] = np.arctan2(ne1[u, 1], ne1[u, 0])
         sl, sc = footprint_slack(px, py, head, station[a:b].copy(), *checker)
         if not footprint_kept(slack, sl, a, SMOOTH_ROOM):
+            continue
+        if not separation_kept(pos, d1, a, px, py, head, floor, checker):
             continue
         apply_move(i, dx, dy, a, ctrl, pos, d1, d2, kappa, slack, station, px, py,
                    ne1[a - a0:b - a0], ne2[a - a0:b - a0], kap, sl, sc)

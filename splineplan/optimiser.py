@@ -22,6 +22,7 @@ from splineplan import kernels
 from splineplan.curvature import curvature_from_derivatives
 from splineplan.footprint import _Checker
 from splineplan.geometry import FloatArray, kernel_floats, kernel_ints
+from splineplan.roadmap import BAND_KEEP
 from splineplan.trajectory_params import TrajectoryParams
 
 log = logging.getLogger(__name__)
@@ -433,6 +434,21 @@ class _Optimiser:
         self.movable[:2] = False  # the start and its heading point
         self.movable[-1] = False
         self.refused = np.zeros(n, dtype=bool)
+        #: clearance [m] beyond the margins that the moves keep at each sample that has it
+        #: (:meth:`keep_separation`)
+        self.floor = np.zeros(len(self.kappa))
+
+    def keep_separation(self, stations: FloatArray, separation: FloatArray) -> None:
+        """Hold the moves to the separation from the obstacles that level 2's placed
+        vertices keep (``separation`` ``(m,)`` [m] beyond the grown obstacles at corridor
+        ``stations`` ``(m,)`` [m]; 0 where no obstacle bounds a vertex's interval): no
+        move brings a sample that keeps :data:`~splineplan.roadmap.BAND_KEEP` of it (at
+        most ``TrajectoryParams.keep_separation``), at its station, below that."""
+        if len(stations) == 0:
+            return
+        share = BAND_KEEP * np.interp(self.station, stations, separation, left=0.0,
+                                      right=0.0)
+        self.floor = np.minimum(share, self.params.keep_separation)
 
     def run(self) -> tuple[int, int, int, int]:
         """Rounds of moves until no point is slow, none may move, ``max_iterations`` moves
@@ -452,7 +468,7 @@ class _Optimiser:
             self.lo.astype(np.int64), self.hi.astype(np.int64),
             kernel_ints(self.cand), self.movable, self.refused,
             self.k, p.kappa_smax, p.kappa_max, p.max_iterations, p.patience,
-            ch.slack_args())
+            kernel_floats(self.floor), ch.slack_args())
         tried, accepted, refused, rounds = (int(v) for v in out)
         log.debug("optimisation: %d rounds, %d tried, %d accepted", rounds, tried, accepted)
         return tried, accepted, refused, rounds
@@ -475,7 +491,7 @@ class _Optimiser:
             min(max(float(self.kappa.max(initial=0.0)), p.kappa_smax), p.kappa_max),
             p.a_max, p.b_max,
             float(start_speed), min(p.max_iterations, SMOOTH_MOVES * len(self.ctrl)),
-            self.checker.slack_args())
+            kernel_floats(self.floor), self.checker.slack_args())
         log.debug("steering smoothing: %d tried, %d accepted", tried, accepted)
         return int(tried), int(accepted)
 

@@ -170,7 +170,14 @@ class Roadmap:
         ``(m,)`` [m]: lateral offsets between which level 3's control polygon may cross
         each chosen vertex's sweep line without coming nearer the obstacles than the
         vertex (nor leaving the vertex's lane where it keeps a lane's centre); see
-        :func:`place_vertices`. Empty: within the free intervals.
+        :func:`place_vertices`. Beside an obstacle on one side and the road's edge on the
+        other they may reach beyond the free interval into the road margin. Empty:
+        within the free intervals.
+    separation
+        ``(m,)`` [m]: how far each placed vertex keeps from the grown obstacles beside it
+        (at most :attr:`RoadmapParams.enough_separation`; 0 where no obstacle bounds its
+        interval), of which level 3's smoothing keeps :data:`BAND_KEEP`. Empty: not
+        placed.
     """
 
     xy: FloatArray
@@ -195,6 +202,7 @@ class Roadmap:
     links: FloatArray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     band_lo: FloatArray = field(default_factory=lambda: np.zeros(0))
     band_hi: FloatArray = field(default_factory=lambda: np.zeros(0))
+    separation: FloatArray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def passage_xy(self) -> FloatArray:
@@ -220,7 +228,7 @@ class Roadmap:
         xy = np.asarray(self.graph_xy)[path]
         return replace(self, xy=xy, l=np.asarray(self.graph_l)[path],
                        length=float(np.hypot(*np.diff(xy, axis=0).T).sum()),
-                       band_lo=np.zeros(0), band_hi=np.zeros(0))
+                       band_lo=np.zeros(0), band_hi=np.zeros(0), separation=np.zeros(0))
 
     @property
     def bottleneck_s(self) -> float:
@@ -353,8 +361,13 @@ def _plan(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float
         raise AssertionError  # unreachable: _raise_blocked raises
     pw = width[path]
     k = int(np.argmin(pw))
-    lat, band_lo, band_hi = place_vertices(corridor, lines, iv_line[path], iv_lo[path],
-                                           iv_hi[path], l0, params)
+    give_lo = give_hi = None
+    if params.place:
+        give_lo, give_hi = _road_give(corridor, lines, iv_line[path], iv_lo[path],
+                                      iv_hi[path], obstacles, params)
+    lat, band_lo, band_hi, kept = place_vertices(corridor, lines, iv_line[path],
+                                                 iv_lo[path], iv_hi[path], l0, params,
+                                                 give_lo, give_hi)
     pline = iv_line[path]
     pxy = lines.center[pline] + lat[:, None] * lines.normal[pline]
     seg = np.diff(pxy, axis=0)
@@ -365,7 +378,7 @@ def _plan(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float
         graph_xy=vxy, graph_s=stations[iv_line], graph_l=mid, graph_width=width,
         graph_line=iv_line, graph_lo=iv_lo, graph_hi=iv_hi, arcs=arcs, path=path,
         start_xy=start, params=params, arc_direct=graph.direct, links=graph.link[steps],
-        band_lo=band_lo, band_hi=band_hi,
+        band_lo=band_lo, band_hi=band_hi, separation=kept,
     )
     logger.debug("roadmap: %d lines, %d vertices, %d arcs, bottleneck %.2f m at s=%.1f m",
                  nline, len(vxy), len(arcs), out.bottleneck_width, out.bottleneck_s)
@@ -389,12 +402,43 @@ PLACE_HOLD = 4.0
 BAND_KEEP = 0.9
 
 
+def _road_give(corridor: Corridor, lines: _Lines, line: NDArray[np.int64], lo: FloatArray,
+               hi: FloatArray, obstacles: Obstacles, params: RoadmapParams
+               ) -> tuple[FloatArray, FloatArray]:
+    """How far [m] each end of the chosen path's free intervals ``lo..hi`` ``(m,)`` on
+    sweep lines ``line`` could move out, were the road edges grown by the car's half
+    width only (no road margin), keeping the obstacles' inflation: ``(m,)``, ``(m,)``
+    (0 where a keep offset, not the road, bounds the line, or where that end is an
+    obstacle's)."""
+    m = len(line)
+    if params.road_margin <= 0.0 or m == 0:
+        return np.zeros(m), np.zeros(m)
+    right, left = corridor.bounds_at(lines.station[line])
+    half = params.vehicle_width / 2.0
+    lo_road = np.abs(lines.lo[line] - (right + params.road_inflation)) < 1e-6
+    hi_road = np.abs(lines.hi[line] - (left - params.road_inflation)) < 1e-6
+    wide = _Lines(lines.station[line], lines.center[line], lines.tangent[line],
+                  lines.normal[line], np.where(lo_road, right + half, lines.lo[line]),
+                  np.where(hi_road, left - half, lines.hi[line]), lines.inflation)
+    w_line, w_lo, w_hi = _free_intervals(wide, obstacles, params.inflation)
+    give_lo, give_hi = np.zeros(m), np.zeros(m)
+    # each interval of the wider lines holds at most one of the path's (the path's lies
+    # within one of them): the one whose range covers the path's midpoint
+    mid = 0.5 * (lo + hi)
+    at = np.flatnonzero((w_lo <= mid[w_line] + 1e-9) & (mid[w_line] <= w_hi + 1e-9))
+    j = w_line[at]
+    give_lo[j] = np.maximum(lo[j] - w_lo[at], 0.0)
+    give_hi[j] = np.maximum(w_hi[at] - hi[j], 0.0)
+    return give_lo, give_hi
+
+
 def place_vertices(corridor: Corridor, lines: _Lines, line: NDArray[np.int64],
-                   lo: FloatArray, hi: FloatArray, l0: float, params: RoadmapParams
-                   ) -> tuple[FloatArray, FloatArray, FloatArray]:
+                   lo: FloatArray, hi: FloatArray, l0: float, params: RoadmapParams,
+                   give_lo: FloatArray | None = None, give_hi: FloatArray | None = None
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
     """Lateral offsets ``(m,)`` [m] of the chosen path's vertices in their free intervals
-    ``lo..hi`` ``(m,)`` on sweep lines ``line``, and the bands ``(m,)``, ``(m,)`` [m] of
-    :attr:`Roadmap.band_lo`, ``band_hi``.
+    ``lo..hi`` ``(m,)`` on sweep lines ``line``, the bands ``(m,)``, ``(m,)`` [m] of
+    :attr:`Roadmap.band_lo`, ``band_hi``, and :attr:`Roadmap.separation` ``(m,)``.
 
     The paper's separation is from obstacles and road edges alike, its threshold
     ``wmax`` making widths beyond it equal; a midpoint between a parked car and the kerb
@@ -403,6 +447,11 @@ def place_vertices(corridor: Corridor, lines: _Lines, line: NDArray[np.int64],
 
     1. as far from the obstacles (the interval's ends that an obstacle sets, not the
        road) as the interval allows, up to :attr:`RoadmapParams.enough_separation`;
+       where an obstacle sets one end and the road the other, the road's end moves out
+       by ``give_lo`` or ``give_hi`` [m] ``(m,)`` (:func:`_road_give`: into the road
+       margin, as far as the obstacles' inflation allows; the footprint may then come to
+       the road's edge, less :data:`PLACE_ROAD_RESERVE`): the separation from the
+       obstacle comes first;
     2. among those offsets, as far from the road edges (the ends the road or the keep
        offsets set) as they allow, up to the safety margin beyond the road margin;
     3. among those, nearest the centre of the route's lane: the lane the vehicle is in
@@ -426,27 +475,34 @@ def place_vertices(corridor: Corridor, lines: _Lines, line: NDArray[np.int64],
         junction = (i >= 0) & (i + 1 < len(starts)) & (st > ends[np.maximum(i, 0)]) & (
             st < starts[nxt])
     road_extra = max(params.safety_margin - params.road_margin, 0.0)
+    zero = np.zeros(len(line))
     return _place_kernel(_f64(lines.station[line]), _f64(lo), _f64(hi), _f64(lines.lo[line]),
-                         _f64(lines.hi[line]), _f64(right), _f64(left), junction, float(l0),
-                         params.enough_separation, road_extra, float(params.lane_width),
-                         float(params.vehicle_width),
+                         _f64(lines.hi[line]), _f64(zero if give_lo is None else give_lo),
+                         _f64(zero if give_hi is None else give_hi), _f64(right), _f64(left),
+                         junction, float(l0), params.enough_separation, road_extra,
+                         float(params.lane_width), float(params.vehicle_width),
                          PLACE_RATE, PLACE_HOLD, PLACE_ROAD_RESERVE, BAND_KEEP)
 
 
 @njit(cache=True)
-def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: FloatArray,
-                  road_hi: FloatArray, right: FloatArray, left: FloatArray,
+def _place_kernel(st: FloatArray, lo_in: FloatArray, hi_in: FloatArray, road_lo: FloatArray,
+                  road_hi: FloatArray, give_lo: FloatArray, give_hi: FloatArray,
+                  right: FloatArray, left: FloatArray,
                   junction: NDArray[np.bool_], l0: float, enough: float, road_extra: float,
                   lane_width: float, vehicle_width: float, rate: float, hold: float,
                   road_reserve: float, keep: float
-                  ) -> tuple[FloatArray, FloatArray, FloatArray]:  # pragma: no cover
+                  ) -> tuple[FloatArray, ...]:  # pragma: no cover
     """:func:`place_vertices` along the path (``st``: the lines' stations; ``road_lo``,
-    ``road_hi``: the lines' bounds from the road or keep offsets; ``right``, ``left``:
+    ``road_hi``: the lines' bounds from the road or keep offsets; ``give_lo``,
+    ``give_hi``: how far each road-set end may move out for step 1; ``right``, ``left``:
     the road's edges, for the lanes; ``road_extra`` [m]: step 2's cap; ``vehicle_width``
     [m]: for the band in a lane, which keeps the footprint inside it; ``rate``,
     ``hold``, ``road_reserve``, ``keep``: :data:`PLACE_RATE`, :data:`PLACE_HOLD`,
     :data:`PLACE_ROAD_RESERVE`, :data:`BAND_KEEP`)."""
-    m = len(lo)
+    m = len(lo_in)
+    lo, hi = lo_in.copy(), hi_in.copy()
+    extra_lo, extra_hi = np.zeros(m), np.zeros(m)
+    by_lo, by_hi = np.zeros(m, dtype=np.bool_), np.zeros(m, dtype=np.bool_)
     out = np.empty(m)
     b_lo = np.empty(m)
     b_hi = np.empty(m)
@@ -458,6 +514,15 @@ def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: Float
         a, b = lo[j], hi[j]
         obs_lo = a > road_lo[j] + 1e-6
         obs_hi = b < road_hi[j] - 1e-6
+        by_lo[j], by_hi[j] = obs_lo, obs_hi
+        # between an obstacle and the road, the road's margin goes to the obstacle's
+        # separation: that end of the interval moves out to the road's edge
+        if obs_lo and not obs_hi:
+            extra_hi[j] = give_hi[j]
+            b = hi[j] = b + give_hi[j]
+        elif obs_hi and not obs_lo:
+            extra_lo[j] = give_lo[j]
+            a = lo[j] = a - give_lo[j]
         w = max(b - a, 0.0)
         # step 1: the obstacles' separation
         if obs_lo and obs_hi:
@@ -480,10 +545,10 @@ def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: Float
             t = min((b1 - a1) / 2.0, road_extra)
             a2, b2 = a1 + t, b1 - t
         elif not obs_lo:
-            t = min(b1 - a1, road_extra)
+            t = min(b1 - a1, road_extra + extra_lo[j])
             a2, b2 = a1 + t, b1
         elif not obs_hi:
-            t = min(b1 - a1, road_extra)
+            t = min(b1 - a1, road_extra + extra_hi[j])
             a2, b2 = a1, b1 - t
         else:
             a2, b2 = a1, b1
@@ -515,19 +580,32 @@ def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: Float
             at_lane[j] = True
             lane_tol[j] = max(lw - vehicle_width, 0.0) / 2.0
         out[j] = min(max(c, a2), b2)
+    # the road margin taken beside an obstacle is there for ``hold`` [m] before and after
+    # it too (where the road bounds that side), so that the vertices reach their offsets
+    # there in time
+    w_from, w_to = _windows(st, hold)
+    for j in range(m):
+        for k in range(w_from[j], w_to[j]):
+            if extra_lo[k] > 0.0 and extra_lo[j] == 0.0 and not by_lo[j] \
+                    and give_lo[j] > 0.0:
+                if b_lo[j] <= lo[j] + 1e-9:
+                    b_lo[j] = lo_in[j] - give_lo[j]
+                lo[j] = lo_in[j] - give_lo[j]
+                extra_lo[j] = -1.0  # taken here, for its neighbour
+            if extra_hi[k] > 0.0 and extra_hi[j] == 0.0 and not by_hi[j] \
+                    and give_hi[j] > 0.0:
+                if b_hi[j] >= hi[j] - 1e-9:
+                    b_hi[j] = hi_in[j] + give_hi[j]
+                hi[j] = hi_in[j] + give_hi[j]
+                extra_hi[j] = -1.0
     # the separation a vertex ahead or behind must reach bounds this one's offset by
     # ``rate`` per metre between them, so that the vertices leave the lane in time
     low, high = b_lo.copy(), b_hi.copy()
     # each vertex's separation held over ``hold`` [m] before and after it
-    k0 = 0
     for j in range(m):
-        while st[k0] < st[j] - hold:
-            k0 += 1
-        k = k0
-        while k < m and st[k] <= st[j] + hold:
+        for k in range(w_from[j], w_to[j]):
             low[j] = max(low[j], b_lo[k])
             high[j] = min(high[j], b_hi[k])
-            k += 1
     for j in range(1, m):
         low[j] = max(low[j], low[j - 1] - rate * (st[j] - st[j - 1]))
         high[j] = min(high[j], high[j - 1] + rate * (st[j] - st[j - 1]))
@@ -549,7 +627,34 @@ def _place_kernel(st: FloatArray, lo: FloatArray, hi: FloatArray, road_lo: Float
             b_lo[j] = max(b_lo[j], v - lane_tol[j])
             b_hi[j] = min(b_hi[j], v + lane_tol[j])
         out[j] = v
-    return out, b_lo, b_hi
+    # the separation each vertex keeps from the obstacles beside it (0: none beside it)
+    kept = np.zeros(m)
+    for j in range(m):
+        if by_lo[j] or by_hi[j]:
+            kept[j] = enough
+            if by_lo[j]:
+                kept[j] = min(kept[j], out[j] - lo[j])
+            if by_hi[j]:
+                kept[j] = min(kept[j], hi[j] - out[j])
+            kept[j] = max(kept[j], 0.0)
+    return out, b_lo, b_hi, kept
+
+
+@njit(cache=True)
+def _windows(st: FloatArray, hold: float
+             ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:  # pragma: no cover
+    """For each of the ascending stations ``st`` [m], the index range ``[from, to)`` of
+    those within ``hold`` [m] of it."""
+    m = len(st)
+    w_from, w_to = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+    a = b = 0
+    for j in range(m):
+        while st[a] < st[j] - hold:
+            a += 1
+        while b < m and st[b] <= st[j] + hold:
+            b += 1
+        w_from[j], w_to[j] = a, b
+    return w_from, w_to
 
 
 # -- construction of the graph ---------------------------------------------------------

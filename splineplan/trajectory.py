@@ -49,6 +49,10 @@ Steps, and the choices beyond the paper:
    round makes the move of the slowest point and the moves of the slowest points of other
    independent stretches. A move changes the samples linearly (cached basis: new = old +
    basis column * delta), so only the changed stretch is re-evaluated and re-checked.
+   Where level 2 placed the vertices, no move (nor the steering's smoothing) brings a
+   sample that keeps 90 % of its vertex's separation from the obstacles, at most
+   ``TrajectoryParams.keep_separation`` beyond the safety margin, below that
+   (:meth:`~splineplan.optimiser._Optimiser.keep_separation`).
 5. Feasibility: the footprint is the vehicle's rectangle centred on the curve and oriented
    along it; its distance to each nearby obstacle polygon is exact (culled by bounding
    box); on the road its corners and long-side midpoints keep the road margin from the road
@@ -507,6 +511,8 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                 np.asarray(roadmap.band_hi, dtype=float))
     curve, refinements, doubled, samples = _refine(pool, counts, checker, params, band)
     opt = _Optimiser(curve, checker, params, samples)
+    if band is not None and len(roadmap.separation) == len(roadmap.s):
+        opt.keep_separation(band[0], np.asarray(roadmap.separation, dtype=float))
     kappa_before = opt.kappa.copy()
     tried, accepted, refused, rounds = opt.run()
     if ease:

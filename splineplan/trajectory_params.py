@@ -77,6 +77,13 @@ class TrajectoryParams:
         control points at first, so that a lateral offset is taken over that distance.
     band_reserve
         Room [m] that each band leaves to its free interval's ends on each side.
+    keep_separation
+        Where level 2 placed the vertices (``RoadmapParams(place=True)``), the most
+        clearance [m] beyond the safety margin that equation (3)'s moves and the
+        steering's smoothing keep from the obstacles: none brings a sample of the curve
+        that keeps ``BAND_KEEP`` (90 %) of its vertex's separation, at most this much,
+        closer than that. Tight passages keep their separation; beyond this much,
+        smoothing may trade separation for speed, as the paper's does. 0: none kept.
     detour_rate
         Largest lateral change [m per m of station] of the detour path
         (:func:`splineplan.control_polygon.detour_roadmap`) tried when the curve along
@@ -104,6 +111,7 @@ class TrajectoryParams:
     patience: int = 12
     bend_rounds: int = 30
     detour_rate: float = 0.4
+    keep_separation: float = 0.3
 
     def __post_init__(self) -> None:
         if not isinstance(self.degree, int | np.integer) or not 2 <= self.degree <= 5:
@@ -121,7 +129,7 @@ class TrajectoryParams:
             raise ParameterError(f"TrajectoryParams.band_fraction must be in [0, 1], "
                                  f"got {self.band_fraction!r}")
         for name in ("road_margin", "lead_in_lengths", "lead_in_time", "band_reserve",
-                     "detour_rate"):
+                     "detour_rate", "keep_separation"):
             require_non_negative(f"TrajectoryParams.{name}", getattr(self, name))
         for name in ("max_iterations", "repair_rounds", "patience", "bend_rounds"):
             value = getattr(self, name)

@@ -21,6 +21,7 @@ from splineplan.errors import GeometryError, ParameterError, RoadBlockedError
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import (
     PLACE_HOLD,
+    PLACE_ROAD_RESERVE,
     Roadmap,
     RoadmapParams,
     plan_roadmap,
@@ -99,9 +100,17 @@ def assert_consistent(rm: Roadmap) -> None:
     m = len(rm.path)
     assert m == len(rm.xy) == len(rm.s) == len(rm.l) == len(rm.width)
     np.testing.assert_allclose(rm.graph_l, (rm.graph_lo + rm.graph_hi) / 2)
-    # the placed vertices stand in their free intervals and bands
+    # the placed vertices stand in their free intervals and bands; beside an obstacle
+    # (separation > 0, held PLACE_HOLD before and after it) placement may take up to the
+    # road margin beyond the road's end
     lo, hi = rm.graph_lo[rm.path], rm.graph_hi[rm.path]
-    assert np.all((lo - 1e-9 <= rm.l) & (rm.l <= hi + 1e-9))
+    inside = (lo - 1e-9 <= rm.l) & (rm.l <= hi + 1e-9)
+    give = rm.params.road_margin + 1e-9
+    beside = np.zeros(m, dtype=bool)
+    if len(rm.separation):
+        near = np.abs(rm.s[:, None] - rm.s[rm.separation > 0][None, :]) <= PLACE_HOLD + 1e-9
+        beside = near.any(axis=1)
+    assert np.all(inside | (beside & (lo - give <= rm.l) & (rm.l <= hi + give)))
     if len(rm.band_lo):  # placed (RoadmapParams.place)
         assert np.all((rm.band_lo - 1e-9 <= rm.l) & (rm.l <= rm.band_hi + 1e-9))
     np.testing.assert_allclose(rm.width, (rm.graph_hi - rm.graph_lo)[rm.path])
@@ -119,9 +128,14 @@ def assert_consistent(rm: Roadmap) -> None:
 
 def assert_free(rm: Roadmap, obs: Obstacles, road: Polygon, r: float,
                 r_road: float | None = None) -> None:
-    """The passage polyline keeps r from every obstacle and ``r_road`` (default: the
-    roadmap's road inflation) from the road edge (shapely)."""
-    r_road = rm.params.road_inflation if r_road is None else r_road
+    """The passage polyline keeps r from every obstacle and ``r_road`` from the road edge
+    (shapely). By default ``r_road`` is the roadmap's road inflation; placed vertices
+    beside an obstacle may take the road margin, less the reserve they leave
+    (``PLACE_ROAD_RESERVE``), for their separation from it."""
+    if r_road is None:
+        r_road = (rm.params.vehicle_width / 2.0 + PLACE_ROAD_RESERVE
+                  if len(rm.separation) and np.any(rm.separation > 0)
+                  else rm.params.road_inflation)
     line = LineString(rm.passage_xy) if len(rm.passage_xy) > 1 else shapely.Point(rm.xy[0])
     for poly in obs.polygons():
         assert line.distance(Polygon(poly)) >= r - 1e-6

@@ -59,6 +59,30 @@ def test_a_passage_between_two_cars_keeps_its_separation(gap: float, centre: flo
     assert float(np.min(tr.clearance_obstacles)) >= 0.85 * best
 
 
+@pytest.mark.parametrize("gap", [2.6, 2.8, 3.0])
+def test_a_passage_beside_the_roads_edge_keeps_its_separation(gap: float) -> None:
+    """A car parked on a two-lane road (6.4 m) leaves ``gap`` [m] to the right edge and
+    too little on its left; the vehicle comes in the right lane at 10 m/s. The best
+    clearance any path keeps from the car is ``gap - 1.8`` (the footprint on the road's
+    edge). Placed, level 2 gives the road margin to that separation (leaving
+    ``PLACE_ROAD_RESERVE`` to the edge) and holds it 4 m before and after the car, and
+    level 3's moves keep ``keep_separation`` beyond the safety margin where the curve
+    kept it: the trajectory is feasible and on the road, keeps at least 0.6 m and 0.75 of
+    the best (the paper's midpoints kept 0.33-0.5 of it, placement without the road
+    margin 0.5-0.62), the wheels keep up, and the car does not crawl through it."""
+    cor = straight(6.4)
+    obs = Obstacles.from_boxes([[60.0, -3.2 + gap + CAR_W / 2]], [0.0], 4.5, CAR_W)
+    tr = plan_corridor(cor, obs, [1.0, -1.6], 0.0, params=TP, roadmap_params=PLACED,
+                       start_speed=10.0, end_speed=None).trajectory
+    best = gap - CAR_W
+    clear = float(np.min(tr.clearance_obstacles))
+    assert tr.feasible and float(np.min(tr.clearance_road)) >= 0.0
+    assert clear >= PLACED.safety_margin + TP.keep_separation - 0.01
+    assert clear >= 0.75 * best
+    assert_wheels_keep_up(tr, TP)
+    assert tr.speed.min() >= 3.0
+
+
 @pytest.mark.parametrize(("width", "lane"), [(6.4, -1.6), (6.4, 1.6), (9.6, -3.2), (12.8, 1.6)])
 def test_one_car_in_the_lane_is_passed_in_the_next_lanes_centre(width: float,
                                                                 lane: float) -> None:
