@@ -434,8 +434,8 @@ class _Optimiser:
         self.movable[:2] = False  # the start and its heading point
         self.movable[-1] = False
         self.refused = np.zeros(n, dtype=bool)
-        #: clearance [m] beyond the margins that the moves keep at each sample that has it
-        #: (:meth:`keep_separation`)
+        #: clearance [m] from the obstacles beyond the safety margin that the moves keep
+        #: at each sample that has it (:meth:`keep_separation`)
         self.floor = np.zeros(len(self.kappa))
 
     def keep_separation(self, stations: FloatArray, separation: FloatArray) -> None:

@@ -516,7 +516,7 @@ def _place_kernel(st: FloatArray, lo_in: FloatArray, hi_in: FloatArray, road_lo:
         obs_hi = b < road_hi[j] - 1e-6
         by_lo[j], by_hi[j] = obs_lo, obs_hi
         # between an obstacle and the road, the road's margin goes to the obstacle's
-        # separation: that end of the interval moves out to the road's edge
+        # separation: that end of the interval moves out into the road margin
         if obs_lo and not obs_hi:
             extra_hi[j] = give_hi[j]
             b = hi[j] = b + give_hi[j]
