@@ -67,10 +67,11 @@ class RoadmapParams:
         edges are grown by ``vehicle_width / 2 + road_margin``. By default the safety
         margin, so that the paper's midpoints keep it from the road edges as from the
         obstacles (with none, 19 of 177 drivable Monaco junction turns that were feasible
-        came out infeasible). With ``place=True``, 0 lets a passage between an obstacle and
-        the road's edge be open where the car fits: the placed vertices keep
-        ``safety_margin`` from the road edges where the obstacles leave room (see
-        :func:`place_vertices`).
+        came out infeasible). With ``place=True``, the placed vertices beside an obstacle
+        give this margin to their separation from it (:func:`place_vertices`), and keep
+        ``safety_margin`` from the road edges where the obstacles leave room; 0 also
+        lets level 2's graph pass between an obstacle and the road's edge where the car
+        just fits.
     lane_width
         Width [m] of a lane (SUMO's default 3.2 m): a road ``w`` wide holds
         ``round(w / lane_width)`` lanes (at least one), whose centres the chosen vertices
