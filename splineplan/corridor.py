@@ -319,14 +319,20 @@ class Corridor:
         return Corridor(ref, ss - s0, lft, r, edges, starts, self.offset + s0, kl, kr, ends,
                         pl, pr)
 
+    def stop_before_end(self, front: float, least: float, gap: float = ROAD_END_GAP
+                        ) -> float:
+        """Station [m] at which a car whose front is ``front`` [m] ahead of its centre
+        stops to keep its front ``gap`` [m] inside a road that ends with the corridor; the
+        corridor's length where that would come at station ``least`` [m] or before (a
+        car that close to the end gets the road up to it)."""
+        cut = self.length - front - gap
+        return cut if cut > least else self.length
+
     def short_of_end(self, front: float, least: float, gap: float = ROAD_END_GAP
                      ) -> Corridor:
-        """The corridor of a road that ends, cut so that a car whose front is ``front``
-        [m] ahead of its centre, stopping at the cut, keeps its front ``gap`` [m] inside
-        the road; unchanged where the cut would come at station ``least`` [m] or before
-        (a car that close to the end gets the road up to it)."""
-        cut = self.length - front - gap
-        return self.slice(0.0, cut) if cut > least else self
+        """The corridor of a road that ends, cut at :meth:`stop_before_end`."""
+        cut = self.stop_before_end(front, least, gap)
+        return self.slice(0.0, cut) if cut < self.length else self
 
     def extend_back(self, length: float) -> Corridor:
         """The corridor with ``length`` [m] more before its start, straight along its first

@@ -164,9 +164,9 @@ def plan(
         end = corridor.length if end_pos is None else end_station(network, corridor, end_pos)
         if network.dead_end(to_edge):
             # the car stops before a road that ends, its front inside
-            end = min(end, corridor.short_of_end(
+            end = min(end, corridor.stop_before_end(
                 rp.vehicle_length / 2.0,
-                least=float(corridor.to_sl(xy)[0, 0]) + rp.vehicle_length).length)
+                least=float(corridor.to_sl(xy)[0, 0]) + rp.vehicle_length))
         if end_pos is not None or end < corridor.length:
             corridor = corridor.slice(0.0, end)
         back = {(route.edges[i], route.edges[i + 1]) for i in turnarounds(network, route)}
