@@ -504,6 +504,10 @@ def _add_plan(sub: argparse._SubParsersAction) -> None:
                    help="maximum speed [m/s]")
     p.add_argument("--d", type=_spacing, default=None, metavar="M",
                    help="sweep-line spacing [m], 0.1 to 10 (1)")
+    p.add_argument("--place", action="store_true",
+                   help="place level 2's vertices for the separation from obstacles and "
+                        "the lane's centre (RoadmapParams(place=True)), and keep it in "
+                        "level 3")
     p.set_defaults(func=_cmd_plan)
 
 
@@ -528,7 +532,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
             print(f"splineplan plan: warning: {args.obstacles} holds no obstacles (no <poly> "
                   "shapes, no vehicles with a <stop> on a lane): planning on an empty road",
                   file=sys.stderr)
-    rp = RoadmapParams() if args.d is None else RoadmapParams(d=args.d)
+    rp = RoadmapParams(place=args.place) if args.d is None else RoadmapParams(
+        d=args.d, place=args.place)
     tp = TrajectoryParams()
     if args.s_max is not None:
         tp = replace(tp, s_max=args.s_max)

@@ -183,6 +183,24 @@ def test_plan_command_writes_trajectory_plan_and_picture(
     assert png.stat().st_size > 10_000
 
 
+def test_plan_command_places_the_vertices_for_the_separation(tmp_path: Path) -> None:
+    """``--place``: level 2 places the vertices (recorded in plan.json with each vertex's
+    separation) and the trajectory keeps at least the separation of the paper's
+    midpoints from the parked car."""
+    clear = {}
+    for flag in ([], ["--place"]):
+        out = tmp_path / ("placed" if flag else "midpoints")
+        rc = main(["plan", str(NETS / "straight.net.xml"), "e0", "e2", "--obstacles",
+                   str(SCENARIOS / "one_obstacle.rou.xml"), "--out", str(out), *flag])
+        saved = json.loads((out / "plan.json").read_text())
+        assert rc == 0 and saved["trajectory"]["feasible"]
+        rm = saved["roadmaps"][0]
+        assert rm["params"]["place"] == bool(flag)
+        assert (len(rm["separation"]) == len(rm["s"])) == bool(flag)
+        clear[bool(flag)] = saved["trajectory"]["min_clearance"]
+    assert clear[True] >= clear[False]
+
+
 def test_plan_command_says_which_limit_an_infeasible_plan_breaks_and_where(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The README's city example: a warning exactly when the plan is infeasible, one line
