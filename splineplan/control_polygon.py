@@ -113,12 +113,13 @@ def _free_intervals(roadmap: Roadmap, distinct: NDArray[np.bool_],
     path = np.asarray(roadmap.path)
     if not (len(path) == len(distinct) and len(roadmap.graph_lo) and len(roadmap.graph_hi)):
         return band
-    lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
-    hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
     if len(roadmap.band_lo) == len(path):
         # the band (which may reach into the road margin beside an obstacle)
         lo = np.asarray(roadmap.band_lo, dtype=float)[distinct]
         hi = np.asarray(roadmap.band_hi, dtype=float)[distinct]
+    else:
+        lo = np.asarray(roadmap.graph_lo, dtype=float)[path][distinct]
+        hi = np.asarray(roadmap.graph_hi, dtype=float)[path][distinct]
     # never narrower than the band (the band reserve may move a vertex off its interval)
     return np.column_stack((np.minimum(lo, band[:, 0]), np.maximum(hi, band[:, 1])))
 

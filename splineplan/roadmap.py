@@ -587,18 +587,15 @@ def _place_kernel(st: FloatArray, lo_in: FloatArray, hi_in: FloatArray, road_lo:
     w_from, w_to = _windows(st, hold)
     for j in range(m):
         for k in range(w_from[j], w_to[j]):
-            if extra_lo[k] > 0.0 and extra_lo[j] == 0.0 and not by_lo[j] \
-                    and give_lo[j] > 0.0:
+            # (taking it again, for another obstacle line, changes nothing)
+            if extra_lo[k] > 0.0 and not by_lo[j]:
                 if b_lo[j] <= lo[j] + 1e-9:
                     b_lo[j] = lo_in[j] - give_lo[j]
                 lo[j] = lo_in[j] - give_lo[j]
-                extra_lo[j] = -1.0  # taken here, for its neighbour
-            if extra_hi[k] > 0.0 and extra_hi[j] == 0.0 and not by_hi[j] \
-                    and give_hi[j] > 0.0:
+            if extra_hi[k] > 0.0 and not by_hi[j]:
                 if b_hi[j] >= hi[j] - 1e-9:
                     b_hi[j] = hi_in[j] + give_hi[j]
                 hi[j] = hi_in[j] + give_hi[j]
-                extra_hi[j] = -1.0
     # the separation a vertex ahead or behind must reach bounds this one's offset by
     # ``rate`` per metre between them, so that the vertices leave the lane in time
     low, high = b_lo.copy(), b_hi.copy()

@@ -13,6 +13,7 @@ import pytest
 import shapely
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from numpy.typing import NDArray
 from oracle import best_clearance
 from shapely.geometry import LineString, Polygon
 
@@ -95,6 +96,15 @@ def field(seed: int, kind: str, count: int, *, length: float = 60.0, width: floa
     return corridor, obs, f(0.0, 0.0), road, goal
 
 
+def beside_obstacles(rm: Roadmap) -> NDArray[np.bool_]:
+    """Which chosen vertices lie within ``PLACE_HOLD`` of a placed vertex that keeps a
+    separation from an obstacle beside it (where placement may take the road margin)."""
+    if not len(rm.separation):
+        return np.zeros(len(rm.path), dtype=bool)
+    near = np.abs(rm.s[:, None] - rm.s[rm.separation > 0][None, :]) <= PLACE_HOLD + 1e-9
+    return np.asarray(near.any(axis=1))
+
+
 def assert_consistent(rm: Roadmap) -> None:
     """Invariants of a result, re-derived from its own arrays."""
     m = len(rm.path)
@@ -106,10 +116,7 @@ def assert_consistent(rm: Roadmap) -> None:
     lo, hi = rm.graph_lo[rm.path], rm.graph_hi[rm.path]
     inside = (lo - 1e-9 <= rm.l) & (rm.l <= hi + 1e-9)
     give = rm.params.road_margin + 1e-9
-    beside = np.zeros(m, dtype=bool)
-    if len(rm.separation):
-        near = np.abs(rm.s[:, None] - rm.s[rm.separation > 0][None, :]) <= PLACE_HOLD + 1e-9
-        beside = near.any(axis=1)
+    beside = beside_obstacles(rm)
     assert np.all(inside | (beside & (lo - give <= rm.l) & (rm.l <= hi + give)))
     if len(rm.band_lo):  # placed (RoadmapParams.place)
         assert np.all((rm.band_lo - 1e-9 <= rm.l) & (rm.l <= rm.band_hi + 1e-9))
@@ -131,11 +138,17 @@ def assert_free(rm: Roadmap, obs: Obstacles, road: Polygon, r: float,
     """The passage polyline keeps r from every obstacle and ``r_road`` from the road edge
     (shapely). By default ``r_road`` is the roadmap's road inflation; placed vertices
     beside an obstacle may take the road margin, less the reserve they leave
-    (``PLACE_ROAD_RESERVE``), for their separation from it."""
-    if r_road is None:
-        r_road = (rm.params.vehicle_width / 2.0 + PLACE_ROAD_RESERVE
-                  if len(rm.separation) and np.any(rm.separation > 0)
-                  else rm.params.road_inflation)
+    (``PLACE_ROAD_RESERVE``), for their separation from it: there, and on the passage
+    through them, the car's half width and that reserve; the other vertices keep the
+    road inflation."""
+    beside = beside_obstacles(rm)
+    if r_road is None and beside.any():
+        edge = road.exterior
+        # 1 cm for the corridor's polyline approximation of curved boundaries
+        assert all(edge.distance(shapely.Point(p)) >= rm.params.road_inflation - 0.01
+                   for p in rm.xy[~beside])
+        r_road = rm.params.vehicle_width / 2.0 + PLACE_ROAD_RESERVE
+    r_road = rm.params.road_inflation if r_road is None else r_road
     line = LineString(rm.passage_xy) if len(rm.passage_xy) > 1 else shapely.Point(rm.xy[0])
     for poly in obs.polygons():
         assert line.distance(Polygon(poly)) >= r - 1e-6
