@@ -19,7 +19,11 @@ Level 2 models the vehicle as a disc of its width; a rectangle's corners reach
 ``(vehicle_length - vehicle_width) / 2`` [m] further ahead and behind. So level 2 plans among
 obstacles elongated by that much along the road (:meth:`Obstacles.elongated`, along the
 reference line's heading at each obstacle's centroid); level 3 checks the exact footprint
-against the original obstacles.
+against the original obstacles. That is exact for a car parallel to the road; where it
+closes a segment, a car driving diagonally may still pass between staggered obstacles, so
+the segment's passage is then looked for with the car's rectangle and turning limit
+(:func:`splineplan.lattice.turning_passages`), and kept where level 3 makes a feasible
+curve through it.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 from splineplan.corridor import PAVED_MIN, Corridor
 from splineplan.errors import RoadBlockedError, SplineplanError, TrajectoryError
 from splineplan.geometry import FloatArray, wrap_angle
+from splineplan.lattice import turning_passages
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
 from splineplan.speed import speed_profile
@@ -268,7 +273,12 @@ def _levels_2_3(seg: Corridor, grown: Obstacles, obstacles: Obstacles, pose: Flo
     t0 = time.perf_counter()
     t1 = t0
     try:
-        rm = plan_roadmap(seg, grown, pose, rp)
+        try:
+            rm = plan_roadmap(seg, grown, pose, rp)
+        except RoadBlockedError as err:
+            t1 = time.perf_counter()
+            return _turning_passage(seg, obstacles, pose, rp, tp, heading, speed, polish,
+                                    err)
         t1 = time.perf_counter()
         tr = plan_trajectory(rm, seg, obstacles, tp, heading, start_speed=speed,
                              end_speed=None, polish=polish)
@@ -277,6 +287,23 @@ def _levels_2_3(seg: Corridor, grown: Obstacles, obstacles: Obstacles, pose: Flo
         clock[0] += t1 - t0
         clock[1] += t2 - t1
     return rm, tr
+
+
+def _turning_passage(seg: Corridor, obstacles: Obstacles, pose: FloatArray,
+                     rp: RoadmapParams, tp: TrajectoryParams, heading: float | None,
+                     speed: float, polish: bool, blocked: RoadBlockedError
+                     ) -> tuple[Roadmap, Trajectory]:
+    """Where level 2 found the segment closed for a car parallel to the road: the first
+    diagonal passage between staggered obstacles, with the car's footprint and turning
+    limit (:func:`splineplan.lattice.turning_passages`), through which level 3 makes a
+    feasible curve; ``blocked`` raised again where there is none."""
+    for rm in turning_passages(seg, obstacles, pose, heading, rp, tp.kappa_max,
+                               tp.road_margin, blocked.station - seg.offset):
+        tr = plan_trajectory(rm, seg, obstacles, tp, heading, start_speed=speed,
+                             end_speed=None, polish=polish)
+        if tr.feasible:
+            return rm, tr
+    raise blocked
 
 
 def warm_up() -> None:

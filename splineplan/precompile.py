@@ -114,6 +114,9 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
     "splineplan.network": (2.5, {
         "_paved_spans": ((F1, F1, F1, F1, F1, F1, F1, I1, f8),),
     }),
+    "splineplan.lattice": (1.0, {
+        "_search": ((F2, F3, I2, I2, F2, i8, f8, I1),),
+    }),
     "splineplan.obstacles": (1.0, {
         "_swept_hulls": ((F1, F1, I1, F1, F1),),
     }),
