@@ -71,9 +71,25 @@ def run_turn(net: object, builder: TurnBuilder, a: str, b: str) -> dict[str, obj
     t_plan = time.perf_counter() - t0
     if routed and routed != (a, b):
         verdict = "avoided"  # level 1 went round the turn
+    in_corridor = None
+    if found and verdict == "infeasible":
+        in_corridor = _drives_in_corridor(p.corridor, turn)
     return {"turn": (a, b), "junction": turn.junction, "drivable": found, "fits": fits,
             "verdict": verdict, "outside": out, "why": why, "route": routed,
-            "t_oracle": t_oracle, "t_plan": t_plan, "t_fits": t_fits}
+            "in_corridor": in_corridor, "t_oracle": t_oracle, "t_plan": t_plan,
+            "t_fits": t_fits}
+
+
+def _drives_in_corridor(corridor: object, turn: object) -> bool:
+    """Whether the oracle drives the turn inside the planner's own corridor (widened to
+    the junctions' paving where the corridor knows it) cut to the turn's area: where it
+    cannot, the planner's drivable area, not its curve, is what fails the turn."""
+    from shapely.geometry import Polygon
+
+    wide = corridor.paved() or corridor  # type: ignore[attr-defined]
+    area = Polygon(wide.polygon()).buffer(0).intersection(turn.window)  # type: ignore[attr-defined]
+    return bool(drive(area, [], turn.start, turn.goal, margin=0.0,  # type: ignore[attr-defined]
+                      search=SEARCH).found)
 
 
 def bench(name: str, path: Path, pairs: list[tuple[str, str]], verbose: bool
@@ -88,10 +104,14 @@ def bench(name: str, path: Path, pairs: list[tuple[str, str]], verbose: bool
         rows.append(r)
         if verbose or (r["drivable"] and r["verdict"] != "feasible") or \
                 (r["verdict"] == "feasible" and float(r["outside"]) > TOL):  # type: ignore[arg-type]
+            inside = ("" if r["in_corridor"] is None else
+                      "; the oracle drives it in the planner's corridor" if r["in_corridor"]
+                      else "; the oracle cannot drive it in the planner's corridor")
             print(f"  {a} -> {b} (junction {r['junction']}): oracle "
                   f"{'drives' if r['drivable'] else 'cannot'}; level 1 "
                   f"{'fits' if r['fits'] else 'too tight'}; planner {r['verdict']}, "
-                  f"outside {float(r['outside']):.2f} m  {r['why']}"[:240], flush=True)  # type: ignore[arg-type]
+                  f"outside {float(r['outside']):.2f} m{inside}  {r['why']}"[:300],  # type: ignore[arg-type]
+                  flush=True)
     drivable = [r for r in rows if r["drivable"]]
     ok = [r for r in drivable if r["verdict"] == "feasible"]
     bad = [r for r in rows if r["verdict"] == "feasible" and float(r["outside"]) > TOL]  # type: ignore[arg-type]
@@ -110,6 +130,12 @@ def bench(name: str, path: Path, pairs: list[tuple[str, str]], verbose: bool
           f"outside the area (> {TOL} m) {len(bad)} (worst {worst:.2f} m; target 0); "
           f"feasible where the oracle cannot drive {len(undrivable_ok)}; median time: "
           f"oracle {t_o:.2f} s, planner {1e3 * t_p:.0f} ms", flush=True)
+    missed = [r for r in drivable if r["verdict"] == "infeasible"]
+    if missed:
+        print(f"  of the {len(missed)} drivable turns planned infeasibly, the oracle drives "
+              f"{sum(bool(r['in_corridor']) for r in missed)} inside the planner's own "
+              f"corridor (with its junction paving); the others need room it does not give",
+              flush=True)
     print(f"  level 1: {len(tight)} turns too tight for the car, {len(tight_right)} of them "
           f"undrivable by the oracle too; of the {len(rows) - len(drivable)} undrivable turns "
           f"{sum(not r['fits'] for r in rows if not r['drivable'])} known to level 1; "
