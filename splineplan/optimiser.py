@@ -30,9 +30,6 @@ log = logging.getLogger(__name__)
 #: Moves per control point that the steering's smoothing may try (a bound on its time).
 SMOOTH_MOVES = 2
 
-#: Share of the turning limit that :meth:`_Optimiser.ease_bends` aims the curvature at
-#: (below 1: the final curve is sampled more densely than the optimiser's samples).
-BEND_TARGET = 0.985
 #: Control points beyond those shaping a sample over the turning limit, on each side, that
 #: :meth:`_Optimiser.ease_bends` moves too (the bend spreads over them).
 BEND_REACH = 3
@@ -495,11 +492,11 @@ class _Optimiser:
         log.debug("steering smoothing: %d tried, %d accepted", tried, accepted)
         return int(tried), int(accepted)
 
-    def ease_bends(self, rounds: int) -> int:
+    def ease_bends(self, rounds: int, target: float) -> int:
         """Where the curve still turns beyond the turning limit after equation (3)'s
         single-point moves, move the control points that shape those samples together:
-        the smallest moves (least squares) that bring the curvature to
-        :data:`BEND_TARGET` of the limit while no sample's footprint comes closer to the
+        the smallest moves (least squares) that bring the curvature to ``target`` of the
+        limit while no sample's footprint comes closer to the
         road's edges or the obstacles than the margins allow (nor closer than it was,
         where it already did). SLSQP, at most ``rounds`` iterations, on the control points
         within :data:`BEND_REACH` of those samples' own. The curve gives up separation
@@ -523,7 +520,7 @@ class _Optimiser:
         if len(pts) == 0:
             return 0
         a, b = int(self.lo[pts].min()), int(self.hi[pts].max())
-        prob = _BendProblem(self, pts, a, b, BEND_TARGET * p.kappa_max)
+        prob = _BendProblem(self, pts, a, b, target * p.kappa_max)
         f0, g0 = prob.objective(np.zeros(prob.size))
         if not (np.isfinite(f0) and np.all(np.isfinite(g0))
                 and np.all(np.isfinite(prob.room(np.zeros(prob.size))))):

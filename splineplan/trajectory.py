@@ -418,10 +418,14 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     for tr, rm, how in sorted(made, key=lambda m: _violation(m[0], params)):
         if _violation(tr, params)[0] > 0 or not _too_sharp(tr, params):
             continue  # the footprint too close, or a kink: easing does not mend them
-        other = _plan_once(rm, corridor, obstacles, params, start_heading, start_speed,
-                           end_speed, **how, ease=True)
-        log.debug("no feasible curve; with its bends eased: %s", other.feasible)
-        traj = _less_violating(traj, other, params)
+        for target in BEND_TARGETS:
+            other = _plan_once(rm, corridor, obstacles, params, start_heading, start_speed,
+                               end_speed, **how, ease=target)
+            log.debug("no feasible curve; with its bends eased to %.3f of the limit: %s",
+                      target, other.feasible)
+            traj = _less_violating(traj, other, params)
+            if traj.feasible or _violation(other, params)[1] > NEAR_LIMIT * params.kappa_max:
+                break
         if traj.feasible:
             break
     return traj
@@ -489,18 +493,26 @@ def _too_sharp(tr: Trajectory, params: TrajectoryParams) -> bool:
 #: Largest share of the turning limit at which :func:`_plan_polygons` tries the junction
 #: polygon's variants and eases a curve's bends.
 NEAR_MISS = 2.5
+#: Shares of the turning limit that the bends' easing aims the curvature at, in turn: the
+#: final curve is sampled more densely than the optimiser's samples, and a bend eased to
+#: just under the limit there can come out just over it between them.
+BEND_TARGETS = (0.985, 0.9)
+#: How far an eased curve may still turn beyond the limit, as a share of it, for the next,
+#: lower target of :data:`BEND_TARGETS` to be tried.
+NEAR_LIMIT = 0.05
 
 
 def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                params: TrajectoryParams, start_heading: float | None, start_speed: float,
                end_speed: float | None, smooth: bool = False,
                frame: VertexFrame | None = None, keep_turns: bool = False,
-               free: bool = False, ease: bool = False) -> Trajectory:
+               free: bool = False, ease: float = 0.0) -> Trajectory:
     """:func:`plan_trajectory` along the roadmap's chosen path (``smooth``: from the
     least-bending control polygon, ``keep_turns``: keeping its turning vertices, ``free``:
     within the free intervals, see :func:`_control_points`; ``frame``: the roadmap's
     :func:`~splineplan.control_polygon.vertex_frame`, computed here if ``None``; ``ease``:
-    with the bends that equation (3) leaves beyond the turning limit eased)."""
+    above 0, with the bends that equation (3) leaves beyond the turning limit eased to that
+    share of it)."""
     rp = roadmap.params
     pool, counts = _control_points(roadmap, corridor, start_heading, params, start_speed,
                                    smooth, frame=frame, keep_turns=keep_turns, free=free)
@@ -515,8 +527,8 @@ def _plan_once(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
         opt.keep_separation(band[0], np.asarray(roadmap.separation, dtype=float))
     kappa_before = opt.kappa.copy()
     tried, accepted, refused, rounds = opt.run()
-    if ease:
-        opt.ease_bends(params.bend_rounds)
+    if ease > 0:
+        opt.ease_bends(params.bend_rounds, ease)
     opt.smooth_steering(start_speed)
     stats = IterationStats(tried, accepted, refused, rounds, refinements, len(curve.ctrl),
                            doubled)
