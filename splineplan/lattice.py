@@ -43,8 +43,8 @@ log = logging.getLogger(__name__)
 STEP = 0.05
 #: Largest angle [rad] between the car's heading and the road's at a node.
 MAX_ANGLE = 0.8
-#: Shares of the turning limit that the heading's change between steps may use, tried in
-#: turn (see :func:`turning_passages`).
+#: Shares of the turning limit that the heading's change between steps may use, each
+#: giving a passage (see :func:`turning_passages`).
 TURN_SHARES = (0.9, 0.75, 1.0)
 #: Distance [m] either side of where level 2 found the road closed within which the
 #: lines are looked at first (see :func:`turning_passages`).
@@ -59,10 +59,10 @@ def turning_passages(corridor: Corridor, obstacles: Obstacles, start_xy: ArrayLi
     [1/m] from ``start_xy`` (heading ``start_heading`` [rad], ``None``: any) to the
     corridor's end among the ``obstacles`` (not grown), each as a :class:`Roadmap` whose
     graph is the path itself: one per share of :data:`TURN_SHARES` of the limit that the
-    steps may use, in that order (a curve through the nodes turns a little harder than
-    the steps, and smooths their corners; which share leaves level 3 a feasible curve
-    differs from passage to passage). Nothing where no node of the corridor's end is
-    reached.
+    steps may use, the widest first (a curve through the nodes turns a little harder
+    than the steps, and smooths their corners; which share leaves level 3 a feasible
+    curve differs from passage to passage). Nothing where no node of the corridor's end
+    is reached.
 
     ``road_margin`` [m]: what the footprint keeps from the road's edges (default
     ``params.road_margin``). ``blocked_at`` [m]: the corridor station where level 2
@@ -123,13 +123,14 @@ def turning_passages(corridor: Corridor, obstacles: Obstacles, start_xy: ArrayLi
     else:
         off = float(wrap_angle(start_heading - road_head[0]))
         first[j0, int(np.argmin(np.abs(angle[0] - off)))] = cap
-    seen: set[bytes] = set()
+    found: dict[bytes, tuple[float, float, NDArray[np.int64]]] = {}
     for share in TURN_SHARES:
         idx = np.zeros(len(st), dtype=np.int64)
         best = _search(first, clear, *spans(share), length, reach, cap, idx)
-        if not best >= 0.0 or idx.tobytes() in seen:
-            continue
-        seen.add(idx.tobytes())
+        if best >= 0.0 and idx.tobytes() not in found:
+            found[idx.tobytes()] = (best, share, idx)
+    # the widest first (a tie keeps the shares' order)
+    for best, share, idx in sorted(found.values(), key=lambda f: -f[0]):
         lats = lat[idx]
         mv = np.diff(idx) + reach
         width = np.concatenate(([cap], clear[np.arange(len(ds)), idx[1:], mv]))
