@@ -163,8 +163,7 @@ def _clearances(corridor: Corridor, obstacles: Obstacles, params: RoadmapParams,
     out[~(np.abs(angle) <= MAX_ANGLE + 1e-9)[:, None, :].repeat(n_lat, axis=1)] = -np.inf
     if len(obstacles):
         # the lines an obstacle's footprint check can reach
-        span = obstacles.vertices
-        so = corridor.to_sl(span)[:, 0]
+        so = corridor.to_sl(obstacles.vertices)[:, 0]
         first = obstacles.offsets[:-1]
         o_lo = np.minimum.reduceat(so, first)
         o_hi = np.maximum.reduceat(so, first)
