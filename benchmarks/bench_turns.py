@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.kinematic_oracle import Search, drive
-from benchmarks.turns import TurnBuilder, outside, random_turns, turns_of
+from benchmarks.turns import Turn, TurnBuilder, outside, random_turns, turns_of
+from splineplan.corridor import Corridor
 from splineplan.network import CarShape, turn_fits
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -80,16 +81,15 @@ def run_turn(net: object, builder: TurnBuilder, a: str, b: str) -> dict[str, obj
             "t_fits": t_fits}
 
 
-def _drives_in_corridor(corridor: object, turn: object) -> bool:
+def _drives_in_corridor(corridor: Corridor, turn: Turn) -> bool:
     """Whether the oracle drives the turn inside the planner's own corridor (widened to
     the junctions' paving where the corridor knows it) cut to the turn's area: where it
     cannot, the planner's drivable area, not its curve, is what fails the turn."""
     from shapely.geometry import Polygon
 
-    wide = corridor.paved() or corridor  # type: ignore[attr-defined]
-    area = Polygon(wide.polygon()).buffer(0).intersection(turn.window)  # type: ignore[attr-defined]
-    return bool(drive(area, [], turn.start, turn.goal, margin=0.0,  # type: ignore[attr-defined]
-                      search=SEARCH).found)
+    wide = corridor.paved() or corridor
+    area = Polygon(wide.polygon()).buffer(0).intersection(turn.window)
+    return bool(drive(area, [], turn.start, turn.goal, margin=0.0, search=SEARCH).found)
 
 
 def bench(name: str, path: Path, pairs: list[tuple[str, str]], verbose: bool

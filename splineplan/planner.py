@@ -271,39 +271,51 @@ def _levels_2_3(seg: Corridor, grown: Obstacles, obstacles: Obstacles, pose: Flo
     """Level 2's roadmap and level 3's trajectory on one segment; ``clock`` gains their
     seconds."""
     t0 = time.perf_counter()
-    t1 = t0
     try:
-        try:
-            rm = plan_roadmap(seg, grown, pose, rp)
-        except RoadBlockedError as err:
-            t1 = time.perf_counter()
-            return _turning_passage(seg, obstacles, pose, rp, tp, heading, speed, polish,
-                                    err)
+        rm = plan_roadmap(seg, grown, pose, rp)
+    except RoadBlockedError as err:
+        blocked: RoadBlockedError | None = err
+    else:
+        blocked = None
+    finally:
         t1 = time.perf_counter()
+        clock[0] += t1 - t0
+    if blocked is not None:
+        return _turning_passage(seg, obstacles, pose, rp, tp, heading, speed, polish,
+                                blocked, clock)
+    try:
         tr = plan_trajectory(rm, seg, obstacles, tp, heading, start_speed=speed,
                              end_speed=None, polish=polish)
     finally:
-        t2 = time.perf_counter()
-        clock[0] += t1 - t0
-        clock[1] += t2 - t1
+        clock[1] += time.perf_counter() - t1
     return rm, tr
 
 
 def _turning_passage(seg: Corridor, obstacles: Obstacles, pose: FloatArray,
                      rp: RoadmapParams, tp: TrajectoryParams, heading: float | None,
-                     speed: float, polish: bool, blocked: RoadBlockedError
-                     ) -> tuple[Roadmap, Trajectory]:
+                     speed: float, polish: bool, blocked: RoadBlockedError,
+                     clock: list[float]) -> tuple[Roadmap, Trajectory]:
     """Where level 2 found the segment closed for a car parallel to the road: the first
     diagonal passage between staggered obstacles, with the car's footprint and turning
     limit (:func:`splineplan.lattice.turning_passages`), through which level 3 makes a
-    feasible curve; ``blocked`` raised again where there is none."""
-    for rm in turning_passages(seg, obstacles, pose, heading, rp, tp.kappa_max,
-                               tp.road_margin, blocked.station - seg.offset):
-        tr = plan_trajectory(rm, seg, obstacles, tp, heading, start_speed=speed,
-                             end_speed=None, polish=polish)
+    feasible curve; ``blocked`` raised again where there is none. ``clock`` gains the
+    search's seconds as level 2's, the curves' as level 3's."""
+    passages = turning_passages(seg, obstacles, pose, heading, rp, tp.kappa_max,
+                                tp.road_margin, blocked.station - seg.offset)
+    while True:
+        t0 = time.perf_counter()
+        rm = next(passages, None)
+        t1 = time.perf_counter()
+        clock[0] += t1 - t0
+        if rm is None:
+            raise blocked
+        try:
+            tr = plan_trajectory(rm, seg, obstacles, tp, heading, start_speed=speed,
+                                 end_speed=None, polish=polish)
+        finally:
+            clock[1] += time.perf_counter() - t1
         if tr.feasible:
             return rm, tr
-    raise blocked
 
 
 def warm_up() -> None:

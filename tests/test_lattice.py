@@ -86,7 +86,7 @@ def test_passages_keep_the_margins_and_the_turning_limit_at_their_nodes() -> Non
         xy = np.asarray(rm.xy)
         step = np.diff(xy, axis=0)
         head = np.arctan2(step[:, 1], step[:, 0])
-        assert np.abs(np.diff(head)).max() <= TP.kappa_max * RP.d + 0.06  # the lateral step
+        assert np.abs(np.diff(head)).max() <= TP.kappa_max * RP.d + 1e-9
         inner = (rm.s[1:] > RP.vehicle_length) & (rm.s[1:] < cor.length - RP.vehicle_length)
         for (x, y), h in zip(xy[1:][inner], head[inner], strict=True):
             c, s = np.cos(h), np.sin(h)
@@ -94,7 +94,7 @@ def test_passages_keep_the_margins_and_the_turning_limit_at_their_nodes() -> Non
             foot = Polygon([(x + c * a - s * b, y + s * a + c * b)
                             for a, b in ((hl, hw), (-hl, hw), (-hl, -hw), (hl, -hw))])
             assert not any(foot.intersects(g) for g in grown)
-            assert road.buffer(0.05).contains(foot)
+            assert road.buffer(1e-6).contains(foot)
 
 
 def test_a_gap_too_narrow_for_the_car_stays_blocked() -> None:
