@@ -17,12 +17,16 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import NETS, ROOT
+from hypothesis import given
+from hypothesis import strategies as st
 from shapely.geometry import LineString, Polygon
 
 from splineplan import cli
+from splineplan.closedloop.control import Control
 from splineplan.errors import ParameterError, ScenarioError
 from splineplan.scenario import load_scenario, sumo_scenario
 from splineplan.sim import simulate
+from splineplan.sumo.world import JunctionFoe
 
 SCENARIOS = ROOT / "scenarios"
 
@@ -506,6 +510,76 @@ def test_planned_vehicle_takes_its_turn_at_an_all_way_stop(tmp_path: Path, q_pos
     pairs = r.metrics["pairs"]
     assert pairs["collision_pairs_planned"] == []
     assert pairs["min_gap_planned"]["value"] >= sc.roadmap.safety_margin
+
+
+@pytest.mark.parametrize("q_pos", [60.0, 100.0])
+def test_a_car_giving_way_inside_a_junction_goes_once_the_foe_waits_for_it(
+        tmp_path: Path, q_pos: float) -> None:
+    """A planned car ('p') turning left at D3 stops inside the junction to give way to
+    SUMO's car coming straight on ('q'); q, seeing p on the junction's lanes, stops too.
+    The all-way stop's rule (a standing foe may go any moment) belongs to D2, the next
+    junction on p's route, not to D3: p goes, and both cross with the margin. Before,
+    p waited in D3 for the standing q, and q for p, until the run's end."""
+    routes = f"""<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vehicle id="p" depart="0" departLane="0" departPos="60" departSpeed="max" type="car">
+  <route edges="E3D3 D3D2 D2D1"/></vehicle>
+<vehicle id="q" depart="0" departLane="0" departPos="{q_pos:g}" departSpeed="max"
+  type="car"><route edges="C3D3 D3E3"/></vehicle>
+</routes>"""
+    sc, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 60.0)
+    assert r.vehicles["p"].status == "arrived"
+    pairs = r.metrics["pairs"]
+    assert pairs["collision_pairs_planned"] == []
+    assert pairs["min_gap_planned"]["value"] >= sc.roadmap.safety_margin
+    arrived = {t.get("id") for t in ET.parse(tmp_path / "out" / "tripinfo.xml").iter("tripinfo")}
+    assert arrived == {"p", "q"}
+
+
+def test_a_car_waiting_to_change_lanes_waits_before_the_junction(tmp_path: Path) -> None:
+    """A planned car ('p') goes straight on from the two-lane D1E1 onto the one-lane
+    bridge, and its footprint reaches over the line into the left lane as it comes to
+    the junction, where SUMO's car 'q' crawls. It waits for the gap before the junction,
+    on its own lane, not inside the junction (where it stood in the way of the crossing
+    traffic, waiting for a gap that the junction's lanes do not need)."""
+    routes = """<routes>
+<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
+<vType id="crawl" length="4.5" width="1.8" vClass="passenger" maxSpeed="0.05"/>
+<vehicle id="q" depart="0" departLane="1" departPos="98" departSpeed="0" type="crawl">
+  <route edges="D1E1 E1E2"/></vehicle>
+<vehicle id="p" depart="0" departLane="0" departPos="30" departSpeed="max" type="car">
+  <route edges="D1E1 bridge_east F1G1"/></vehicle>
+</routes>"""
+    _, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 30.0)
+    assert r.metrics["pairs"]["collision_pairs_planned"] == []
+    d = r.vehicles["p"].driven
+    lanes = [str(lane) for lane in d["lane"]]
+    stands = [lane for lane, v in zip(lanes, d["speed"], strict=True) if float(v) < 0.1]
+    assert stands and all(lane == "D1E1_0" for lane in stands), set(stands)
+
+
+@given(st.floats(0.0, 30.0), st.floats(0.0, 30.0), st.sampled_from(["a", "b"]),
+       st.booleans())
+def test_of_two_planned_cars_giving_way_to_each_other_one_goes_first(
+        d_a: float, d_b: float, first: str, same: bool) -> None:
+    """Two standing planned cars, each of which must give way to the other by SUMO's
+    right of way (both inside a junction, say), at ``d_a`` and ``d_b`` [m] from their
+    conflict area: exactly one of them takes the other for one that goes first. Both
+    waiting was a deadlock; both going, a collision."""
+    if same:
+        d_b = d_a
+    ids = ("a", "b") if first == "a" else ("b", "a")
+
+    def goes_first(me: str, other: str, d_me: float, d_other: float) -> bool:
+        view = type("View", (), {"board": {other: None}, "ego": me})()
+        foe = JunctionFoe(other, d_me, d_other, d_me + 3.0, d_other + 3.0, True, 0.0, 4.5)
+        return Control._goes_first(view, foe)  # type: ignore[arg-type]
+
+    a_waits = goes_first(ids[0], ids[1], d_a, d_b)
+    b_waits = goes_first(ids[1], ids[0], d_b, d_a)
+    assert a_waits != b_waits
+    if d_a != d_b:
+        assert b_waits == (d_a < d_b)  # the nearer one goes first
 
 
 def test_plan_keeps_clear_of_others_plans() -> None:

@@ -27,7 +27,7 @@ from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.errors import SplineplanError
 from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.spacetime import box_gap
-from splineplan.sumo.world import LanePlace, Signals
+from splineplan.sumo.world import JunctionFoe, LanePlace, Signals
 from splineplan.traffic import first_in_reach, probe_points, safe_speed
 
 #: A planned vehicle within this distance [m] of where its published plan puts it keeps to
@@ -359,26 +359,32 @@ class Control(Perception):
         :data:`YIELD_STOP` of the area stays there while it must give way: it is in the
         area only within :data:`YIELD_EDGE` of it. A foe standing still outside the area
         is waiting (for a light or another vehicle) and is no conflict, except at an
-        all-way stop, where it goes once it has stopped (SUMO's drivers do not see a
-        vehicle that SUMO does not drive approach): there a foe may speed up from its speed
-        at :data:`FOE_ACCEL` to reach the area.
+        all-way stop that the ego has not yet entered, where it goes once it has stopped
+        (SUMO's drivers do not see a vehicle that SUMO does not drive approach), and
+        another planned vehicle that goes first (:meth:`_goes_first`): such a foe may speed
+        up from its speed at :data:`FOE_ACCEL` to reach the area.
         """
         ego = self.sc.ego
         foes = self.signals.foes
         if foes is None:  # an older SUMO, or the ego not on its route: SUMO's view only
             return math.inf
-        allway = self._next_stop_kind() == "w"
+        kind, junction = self._next_stop()
+        inside = self.last_lane.startswith(":")
         cap = math.inf
         for foe in foes:
             ego_in, foe_in, ego_out, foe_out, must_yield = (
                 foe.ego_in, foe.foe_in, foe.ego_out, foe.foe_out, foe.must_yield)
             if not must_yield or ego_in <= YIELD_EDGE:
                 continue  # the ego has the way, or is in the area already
+            # the all-way stop's rule holds for its own foes, and only until the ego is in
+            # the junction (SUMO's drivers wait for a vehicle on the junction's lanes)
+            going = ((kind == "w" and not inside and _junction_of(foe.foe_lane) == junction)
+                     or self._goes_first(foe))
             v_f = foe.foe_speed
             foe_out += foe.foe_length
-            if foe_out <= 0.0 or (foe_in > 0.0 and v_f < STOPPED_FOE_SPEED and not allway):
+            if foe_out <= 0.0 or (foe_in > 0.0 and v_f < STOPPED_FOE_SPEED and not going):
                 continue  # cleared, or waiting outside the area
-            t_foe_in = (_reach_time(max(foe_in, 0.0), v_f, FOE_ACCEL) if allway
+            t_foe_in = (_reach_time(max(foe_in, 0.0), v_f, FOE_ACCEL) if going
                         else max(foe_in, 0.0) / max(v_f, 1e-3))
             t_foe_out = foe_out / max(v_f, 1e-3)
             t_in = self._time_along_plan(ego_in)
@@ -391,6 +397,14 @@ class Control(Perception):
                 self.why_slow = (f"giving way at a junction to vehicle '{foe.id}', as "
                                  "SUMO's right of way says")
         return cap
+
+    def _goes_first(self, foe: JunctionFoe) -> bool:
+        """Whether ``foe``, another planned vehicle standing as near the conflict area as
+        the ego (or nearer; by id where equally near) while each must give way to the
+        other, goes first: the ego then waits for it, and it does not wait for the ego."""
+        if foe.id not in self.board or foe.foe_speed >= STOPPED_FOE_SPEED:
+            return False
+        return (foe.foe_in, foe.id) < (foe.ego_in, self.ego)
 
     def _allway_speed(self, cap: float) -> float:
         """Speed cap [m/s] that gives way at an all-way stop once the vehicle has stopped
@@ -434,17 +448,22 @@ class Control(Perception):
         centre = shape.mean(axis=0)
         return centre, float(np.max(np.hypot(*(shape - centre).T)))
 
-    def _next_stop_kind(self) -> str:
+    def _next_stop(self) -> tuple[str, str]:
         """The kind of stop (:meth:`~splineplan.network.RoadNetwork.stop_kind`) at the
-        next junction on the route, ``""`` where it has none; the one the vehicle stands
-        at, or has just left, counts while it is not yet in the junction."""
+        next junction on the route and that junction's id, ``("", "")`` where it has no
+        stop; the one the vehicle stands at, or has just left, counts while it is not yet
+        in the junction, and the one it is in, until it has left it."""
         if not self._stop_lines:
-            return ""
+            return "", ""
         front = self.station + self.sc.ego.length / 2.0
-        for a, _ in self._junction_spans:
-            if a >= front - STOP_REACH:
-                return next((k for line, _, k in self._stop_lines if line == a), "")
-        return ""
+        for a, b in self._junction_spans:
+            if a >= front - STOP_REACH or front < b:
+                for line, edge, kind in self._stop_lines:
+                    if line == a:
+                        net = self.net
+                        return kind, net.to_nodes[net.edge_index(edge)]
+                return "", ""
+        return "", ""
 
     def _lane_reach(self, lane_id: str, width: float) -> float:
         """How far [m] the ego can go along its path before its footprint comes within
@@ -622,11 +641,15 @@ class Control(Perception):
         at its speed, will be less than the gap behind or ahead of where the ego then is
         (:data:`CHANGE_GAP_TIME` at the follower's speed, and the room the follower needs
         to brake to the ego's speed) holds the ego back before that place, if it can
-        still stop there at its emergency braking."""
+        still stop there at its emergency braking; before the junction, where that place
+        would leave it standing inside one (``keep_clear``). Inside a junction the ego goes
+        on: the lanes it reaches into there are other connections, and a car standing in a
+        junction blocks it."""
         ch = self.lane_change
         o = self.others
-        if ch is None or self.traj is None or not o.n or self.corridor is None:
-            return math.inf
+        if (ch is None or self.traj is None or not o.n or self.corridor is None
+                or self.last_lane.startswith(":")):
+            return math.inf  # (in a junction there are no lanes to change between)
         tp, ego = self.sc.trajectory, self.sc.ego
         ahead = ch.at - self.u
         stop = self._stop_short(ahead)
@@ -660,6 +683,9 @@ class Control(Perception):
             if short:
                 self.why_slow = (f"waiting for a gap to change lanes (vehicle '{o.ids[j]}' "
                                  "in the lane)")
+                if self.keep_clear:  # not inside the junction the change reaches into
+                    stop = min(stop, self._keep_clear_speed(ch.at - YIELD_STOP
+                                                            + ego.length / 2.0))
                 return stop  # one that reaches over the line already stands
         return math.inf
 
@@ -758,6 +784,12 @@ def _reach_time(dist: float, speed: float, accel: float) -> float:
     """Time [s] to cover ``dist`` [m] from ``speed`` [m/s] speeding up at ``accel``
     [m/s²]."""
     return (math.sqrt(speed * speed + 2.0 * accel * dist) - speed) / accel
+
+
+def _junction_of(lane_id: str) -> str:
+    """The junction of SUMO's internal lane ``lane_id`` (``:<junction>_<link>_<lane>``),
+    ``""`` for a lane that is not internal."""
+    return lane_id[1:].rsplit("_", 2)[0] if lane_id.startswith(":") else ""
 
 
 def _lane_index(lane_id: str) -> int:
