@@ -461,7 +461,8 @@ class Control(Perception):
                 for line, edge, kind in self._stop_lines:
                     if line == a:
                         net = self.net
-                        return kind, net.to_nodes[net.edge_index(edge)]
+                        return kind, (net.to_nodes[net.edge_index(edge)] if net.to_nodes
+                                      else "")
                 return "", ""
         return "", ""
 
