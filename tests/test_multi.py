@@ -568,18 +568,19 @@ def test_of_two_planned_cars_giving_way_to_each_other_one_goes_first(
     waiting was a deadlock; both going, a collision."""
     if same:
         d_b = d_a
-    ids = ("a", "b") if first == "a" else ("b", "a")
+    one, two = ("a", "b") if first == "a" else ("b", "a")  # at d_a and d_b
 
-    def goes_first(me: str, other: str, d_me: float, d_other: float) -> bool:
+    def waits(me: str, other: str, d_me: float, d_other: float) -> bool:
+        """Whether ``me`` takes ``other`` for one that goes first (and waits for it)."""
         view = type("View", (), {"board": {other: None}, "ego": me})()
         foe = JunctionFoe(other, d_me, d_other, d_me + 3.0, d_other + 3.0, True, 0.0, 4.5)
         return Control._goes_first(view, foe)  # type: ignore[arg-type]
 
-    a_waits = goes_first(ids[0], ids[1], d_a, d_b)
-    b_waits = goes_first(ids[1], ids[0], d_b, d_a)
-    assert a_waits != b_waits
+    one_waits = waits(one, two, d_a, d_b)
+    two_waits = waits(two, one, d_b, d_a)
+    assert one_waits != two_waits
     if d_a != d_b:
-        assert b_waits == (d_a < d_b)  # the nearer one goes first
+        assert two_waits == (d_a < d_b)  # the nearer one goes first
 
 
 def test_plan_keeps_clear_of_others_plans() -> None:

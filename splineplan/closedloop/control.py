@@ -399,9 +399,11 @@ class Control(Perception):
         return cap
 
     def _goes_first(self, foe: JunctionFoe) -> bool:
-        """Whether ``foe``, another planned vehicle standing as near the conflict area as
-        the ego (or nearer; by id where equally near) while each must give way to the
-        other, goes first: the ego then waits for it, and it does not wait for the ego."""
+        """Whether ``foe``, another planned vehicle that the ego must give way to, standing
+        as near the conflict area as the ego or nearer (by id where equally near), goes
+        first: the ego then waits for it as for one that may move off. Where each must
+        give way to the other (both inside a junction), the nearer goes and the other
+        waits, where both waited before."""
         if foe.id not in self.board or foe.foe_speed >= STOPPED_FOE_SPEED:
             return False
         return (foe.foe_in, foe.id) < (foe.ego_in, self.ego)
