@@ -433,6 +433,24 @@ def test_planned_vehicle_changes_lanes_only_into_a_gap(tmp_path: Path) -> None:
     assert across > 5  # it did change lanes
 
 
+def _p_crosses_q(tmp_path: Path, p: tuple[int, float, str], q: tuple[int, float, str],
+                 duration: float) -> None:
+    """On the city network, the planned car 'p' and SUMO's car 'q', each departing at full
+    speed from ``(lane, position [m], route edges)``, cross paths: p arrives, no footprint
+    with a planned car overlaps another, and p keeps the safety margin from every car."""
+    cars = "".join(
+        f'<vehicle id="{vid}" depart="0" departLane="{lane}" departPos="{pos:g}" '
+        f'departSpeed="max" type="car"><route edges="{edges}"/></vehicle>\n'
+        for vid, (lane, pos, edges) in (("p", p), ("q", q)))
+    routes = ('<routes>\n<vType id="car" length="4.5" width="1.8" vClass="passenger"/>\n'
+              f"{cars}</routes>")
+    sc, r = _p_among_sumo(tmp_path, "city.net.xml", routes, duration)
+    assert r.vehicles["p"].status == "arrived"
+    pairs = r.metrics["pairs"]
+    assert pairs["collision_pairs_planned"] == []
+    assert pairs["min_gap_planned"]["value"] >= sc.roadmap.safety_margin
+
+
 def test_planned_vehicle_keeps_a_junction_clear(tmp_path: Path) -> None:
     """A car crawls just beyond a junction: a planned vehicle coming up behind it stops
     before the junction, as SUMO's drivers do, rather than in it, where it would stand in
@@ -498,18 +516,7 @@ def test_planned_vehicle_takes_its_turn_at_an_all_way_stop(tmp_path: Path, q_pos
     car SUMO does not drive, so p, once stopped, waits for q to cross; they keep the
     margin (p driving through hit q at 60 m, and p going after its stop alone hit q at
     0 m)."""
-    routes = f"""<routes>
-<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
-<vehicle id="p" depart="0" departLane="1" departPos="20" departSpeed="max" type="car">
-  <route edges="E2D2 D2C2"/></vehicle>
-<vehicle id="q" depart="0" departLane="0" departPos="{q_pos:g}" departSpeed="max"
-  type="car"><route edges="D3D2 D2D1"/></vehicle>
-</routes>"""
-    sc, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 40.0)
-    assert r.vehicles["p"].status == "arrived"
-    pairs = r.metrics["pairs"]
-    assert pairs["collision_pairs_planned"] == []
-    assert pairs["min_gap_planned"]["value"] >= sc.roadmap.safety_margin
+    _p_crosses_q(tmp_path, (1, 20.0, "E2D2 D2C2"), (0, q_pos, "D3D2 D2D1"), 40.0)
 
 
 @pytest.mark.parametrize("q_pos", [60.0, 100.0])
@@ -520,18 +527,7 @@ def test_a_car_giving_way_inside_a_junction_goes_once_the_foe_waits_for_it(
     The all-way stop's rule (a standing foe may go any moment) belongs to D2, the next
     junction on p's route, not to D3: p goes, and both cross with the margin. Before,
     p waited in D3 for the standing q, and q for p, until the run's end."""
-    routes = f"""<routes>
-<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
-<vehicle id="p" depart="0" departLane="0" departPos="60" departSpeed="max" type="car">
-  <route edges="E3D3 D3D2 D2D1"/></vehicle>
-<vehicle id="q" depart="0" departLane="0" departPos="{q_pos:g}" departSpeed="max"
-  type="car"><route edges="C3D3 D3E3"/></vehicle>
-</routes>"""
-    sc, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 60.0)
-    assert r.vehicles["p"].status == "arrived"
-    pairs = r.metrics["pairs"]
-    assert pairs["collision_pairs_planned"] == []
-    assert pairs["min_gap_planned"]["value"] >= sc.roadmap.safety_margin
+    _p_crosses_q(tmp_path, (0, 60.0, "E3D3 D3D2 D2D1"), (0, q_pos, "C3D3 D3E3"), 60.0)
     arrived = {t.get("id") for t in ET.parse(tmp_path / "out" / "tripinfo.xml").iter("tripinfo")}
     assert arrived == {"p", "q"}
 

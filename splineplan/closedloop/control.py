@@ -460,12 +460,11 @@ class Control(Perception):
         front = self.station + self.sc.ego.length / 2.0
         for a, b in self._junction_spans:
             if a >= front - STOP_REACH or front < b:
-                for line, edge, kind in self._stop_lines:
-                    if line == a:
-                        net = self.net
-                        return kind, (net.to_nodes[net.edge_index(edge)] if net.to_nodes
-                                      else "")
-                return "", ""
+                edge, kind = next(((e, k) for line, e, k in self._stop_lines if line == a),
+                                  ("", ""))
+                net = self.net
+                return kind, (net.to_nodes[net.edge_index(edge)] if edge and net.to_nodes
+                              else "")
         return "", ""
 
     def _lane_reach(self, lane_id: str, width: float) -> float:
