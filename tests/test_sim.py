@@ -30,6 +30,7 @@ from splineplan.errors import (
     UnknownEdgeError,
     VehicleClassError,
 )
+from splineplan.geometry import FloatArray
 from splineplan.metrics import box_distances, footprint
 from splineplan.network import load_network, route_corridor
 from splineplan.roadmap import RoadmapParams, plan_roadmap
@@ -189,6 +190,61 @@ def test_a_closure_found_from_inside_the_junction_before_it_is_driven_to(
     assert r.status == "arrived", r.reason
     assert "1376#2" in r.metrics["route"]
     assert r.metrics["collisions"] == 0
+
+
+def _free_drive(network: Path, start: str, goal: str, out: Path) -> SimResult:
+    """The city scenario's ego alone on ``network`` from 20 m along ``start`` to ``goal``."""
+    sc = load_scenario(SCENARIOS / "city.toml")
+    ego = dataclasses.replace(sc.ego, start_edge=start, goal_edge=goal, start_pos=20.0,
+                              start_lane=0, goal_pos=None, depart=0.0)
+    sc = dataclasses.replace(sc, network=network, routes=(), additional=(), ego=ego,
+                             egos=(ego,), sim=dataclasses.replace(sc.sim, duration=200.0))
+    return simulate(sc, out_dir=out, progress=False)
+
+
+def _driven(r: SimResult) -> dict[str, FloatArray]:
+    with (r.out_dir / "trajectory.csv").open() as fh:
+        rows = list(csv.DictReader(fh))
+    return {k: np.array([float(row[k]) for row in rows])
+            for k in ("t", "speed", "curvature", "a_lon", "a_lat")}
+
+
+@pytest.mark.parametrize(("start", "goal"), [("C3D3", "B1A1"), ("B2B1", "A3A2"),
+                                             ("B2C2", "D0D1")])
+def test_a_free_drive_never_brakes_harder_than_the_vehicle_may(tmp_path: Path, start: str,
+                                                              goal: str) -> None:
+    """The grid, no traffic, no lights: nothing asks for an emergency stop, so the
+    driven speed never falls faster than ``b_max`` (5 % for the speed's rounding). A
+    replan whose curve, made inside a junction's turn, leaves the car straight along its
+    heading and then must turn harder asked for the emergency rate (8 m/s^2 on each of
+    these three routes before); such a replan is put off while the plan reaches far
+    enough, and the car keeps its limits."""
+    r = _free_drive(NETS / "grid.net.xml", start, goal, tmp_path)
+    assert r.status == "arrived", r.reason
+    tp = load_scenario(SCENARIOS / "city.toml").trajectory
+    d = _driven(r)
+    assert d["a_lon"].min() >= -1.05 * tp.b_max
+    assert np.abs(d["a_lat"]).max() <= 1.05 * tp.mu * tp.g
+    assert np.abs(d["curvature"]).max() <= 1.02 / tp.min_turn_radius
+
+
+def test_a_route_planned_feasibly_is_driven_within_the_turning_limit(tmp_path: Path
+                                                                    ) -> None:
+    """The city, D3E3 to C2B2, alone: its plan from level 1 to level 3 keeps the car's
+    limits, and so does the closed loop, whose plans now ease the bends equation (3)
+    leaves too sharp as the plan does (before: a driven curvature of 0.28 1/m, a 3.6 m
+    radius, where the car turns on 4.2 m)."""
+    from splineplan.pipeline import plan
+
+    net = load_network(NETS / "city.net.xml")
+    assert plan(net, "D3E3", "C2B2").trajectory.feasible
+    r = _free_drive(NETS / "city.net.xml", "D3E3", "C2B2", tmp_path)
+    assert r.status == "arrived", r.reason
+    tp = load_scenario(SCENARIOS / "city.toml").trajectory
+    d = _driven(r)
+    assert np.abs(d["curvature"]).max() <= 1.02 / tp.min_turn_radius
+    assert np.abs(d["a_lat"]).max() <= 1.05 * tp.mu * tp.g
+    assert r.metrics["collisions"] == 0 and r.metrics["time_off_road"] == 0.0
 
 
 def test_blocked_road_reroutes(runs: dict[str, SimResult]) -> None:

@@ -69,6 +69,7 @@ class DriverState:
     limited: int
     traffic_after: float
     trigger_after: float
+    horizon_after: float
     others: Others
     board: Any  # Mapping[str, cooperate.Published]: the plans published so far
     priority: int

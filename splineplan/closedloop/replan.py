@@ -58,6 +58,19 @@ GO_EARLY = 0.5
 _GO_MOVED = 0.5
 #: A plan stands where its speed is at most this [m/s].
 _STANDS = 0.05
+#: A routine replan (the plan runs short) whose speed profile falls more than this [m/s]
+#: below what braking at ``b_max`` from the vehicle's speed allows is put off while the
+#: current plan reaches at least :data:`DEFER_REACH` of the replan distance ahead: a new
+#: curve leaves the vehicle straight along its heading, so one made inside a bend must
+#: turn harder soon after, and the vehicle would brake at its emergency rate along a kink.
+#: It drives on along its plan instead and plans again every :data:`TRIGGER_PERIOD`. Not
+#: for a vehicle that keeps to its lane among SUMO's traffic: there the plans put off cost
+#: arrivals (city, 25 % planned, seeds 1 and 3: 30 and 20 arrived in 300 s against 46 and
+#: 28).
+BRAKE_SLACK = 1.0
+#: Share of ``sim.replan_distance`` that the current plan must still reach for a routine
+#: replan to be put off (and never less than the distance to stop in).
+DEFER_REACH = 0.5
 #: Period [s] of the checks for new obstacles ahead and for traffic beside the ego coming
 #: near the plan (a reaction time well below a driver's; the deviation and horizon checks,
 #: and the ego's own safety checks, run every step).
@@ -77,7 +90,9 @@ class Replan:
         ``deviation`` (SUMO put the ego off the plan), ``traffic`` (a moving vehicle beside
         the ego comes near the planned path), ``reroute`` (level 1 after level 2 found the
         road closed), ``cooperation`` (again while waiting for another planned vehicle's
-        published plan) or ``retry`` (after a failed plan).
+        published plan), ``retry`` (after a failed plan) or ``put off`` (a ``horizon``
+        replan not taken, whose curve would make the vehicle brake harder than
+        ``b_max``: :data:`BRAKE_SLACK`).
     planning_time
         Wall time [s] of the planning (levels 1 to 3 as needed).
     station
@@ -94,6 +109,11 @@ class Replan:
     station: float
     ok: bool = True
     detail: str = ""
+
+
+class _PutOff(SplineplanError):
+    """A routine replan whose curve would make the vehicle brake harder than ``b_max``:
+    not taken."""
 
 
 @dataclass(frozen=True)
@@ -198,9 +218,12 @@ class Replanning(Perception):
         assert self.corridor is not None
         left = float(self.path_s[-1]) - self.u
         if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
-                left < sim.replan_distance):
+                left < sim.replan_distance) and self.time >= self.horizon_after:
+            stop = 0.5 * self.v**2 / self.sc.trajectory.b_max
             self._replan("horizon", f"{left:.1f} m of the plan left",
-                         obstacles=self._obstacles_ahead(ahead))
+                         obstacles=self._obstacles_ahead(ahead),
+                         put_off=not (self.truncated or self.keep_lane)
+                         and left > max(DEFER_REACH * sim.replan_distance, stop))
 
     def _set_pose_from_sumo(self) -> None:
         """The pose where SUMO has the vehicle (as last perceived)."""
@@ -208,10 +231,22 @@ class Replanning(Perception):
         c = front - self.sc.ego.length / 2.0 * np.array([math.cos(h), math.sin(h)])
         self.pose = np.array([c[0], c[1], h])
 
-    def _replan(self, reason: str, detail: str, *, obstacles: Obstacles | None = None) -> None:
+    def _replan(self, reason: str, detail: str, *, obstacles: Obstacles | None = None,
+                put_off: bool = False) -> None:
+        """Plan again (levels 2 and 3, level 1 where the road is found closed). With
+        ``put_off``, a plan that would make the vehicle brake harder than ``b_max`` is not
+        taken (:data:`BRAKE_SLACK`): the vehicle keeps its plan and tries again after
+        :data:`TRIGGER_PERIOD`."""
         t0 = time.perf_counter()
         obstacles = self._obstacles_ahead() if obstacles is None else obstacles
-        ok, msg = self._plan(obstacles)
+        ok, msg = self._plan(obstacles, put_off=put_off)
+        if isinstance(msg, _PutOff):
+            elapsed = time.perf_counter() - t0
+            self.plan_seconds += elapsed
+            self.horizon_after = self.time + TRIGGER_PERIOD - 0.5 * self.dt
+            self.replans.append(Replan(self.time, "put off", elapsed, self.station, False,
+                                       f"{detail}; {msg}"))
+            return
         reroutes = 0
         while not ok and isinstance(msg, RoadBlockedError) and reroutes < _MAX_REROUTES:
             reroutes += 1
@@ -220,7 +255,7 @@ class Replanning(Perception):
                 msg = why
                 break
             obstacles = self._obstacles_ahead()
-            ok, msg = self._plan(obstacles)
+            ok, msg = self._plan(obstacles, put_off=put_off)
             if ok:
                 reason = "reroute"
                 detail = why
@@ -243,15 +278,16 @@ class Replanning(Perception):
         self._brake_before_blockage(msg)
 
     def _level3(self) -> TrajectoryParams:
-        """Level 3's parameters in the loop: the scenario's, without the easing of the
-        bends that equation (3) leaves too sharp (``bend_rounds=0``). Among SUMO's
-        traffic, eased plans measured worse (city, 25 % planned, seeds 1-5: 25
-        overlapping pairs against 17) and took twice the planning time; on the random
-        Monaco routes with no traffic, their replans jolted the car (lateral acceleration
-        within the limit on 45 runs of 49, against 48)."""
-        return replace(self.sc.trajectory, bend_rounds=0)
+        """Level 3's parameters in the loop: the scenario's; for a vehicle that keeps to
+        its lane among SUMO's traffic, without the easing of the bends that equation (3)
+        leaves too sharp (``bend_rounds=0``): there eased plans measured worse (city,
+        25 % planned, seeds 1-5: 25 overlapping pairs against 17) and took twice the
+        planning time."""
+        if self.keep_lane:
+            return replace(self.sc.trajectory, bend_rounds=0)
+        return self.sc.trajectory
 
-    def _plan(self, obstacles: Obstacles) -> tuple[bool, Any]:
+    def _plan(self, obstacles: Obstacles, *, put_off: bool = False) -> tuple[bool, Any]:
         """Levels 2 and 3 on the window ahead. Returns (ok, error).
 
         Moving vehicles beside the ego (:meth:`_moving_obstacles`) are planned around too
@@ -260,24 +296,26 @@ class Replanning(Perception):
         time-gap speed control. A vehicle that keeps to its lane (``keep_lane``, among
         SUMO's traffic: :mod:`.lanes`) plans within its lane first, where the moving
         vehicles beside it are in other lanes and left to SUMO's drivers and the time gap.
+        With ``put_off``, the first plan made that would make the vehicle brake harder
+        than ``b_max`` ends the search (a :class:`_PutOff` error).
         """
         if self.keep_lane:
-            ok, err = self._plan_among(obstacles, None, in_lane=True)
-            if ok:
+            ok, err = self._plan_among(obstacles, None, in_lane=True, put_off=put_off)
+            if ok or isinstance(err, _PutOff):
                 return ok, err
             log.debug("t=%.1f no plan within the lane (%s): planning on the whole road",
                       self.time, err)
         moving = self._moving_obstacles()
         if len(moving):
-            ok, err = self._plan_among(obstacles, moving)
-            if ok:
+            ok, err = self._plan_among(obstacles, moving, put_off=put_off)
+            if ok or isinstance(err, _PutOff):
                 return ok, err
             log.debug("t=%.1f no plan around the traffic beside the ego (%s): planning "
                       "among the stopped obstacles only", self.time, err)
-        return self._plan_among(obstacles, None)
+        return self._plan_among(obstacles, None, put_off=put_off)
 
     def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None, *,
-                    in_lane: bool = False) -> tuple[bool, Any]:
+                    in_lane: bool = False, put_off: bool = False) -> tuple[bool, Any]:
         """Levels 2 and 3 among ``obstacles`` (and ``moving``, or ``in_lane``: within the
         vehicle's lane, :func:`.lanes.lane_band`; both strictly: any failure or a
         trajectory short of the margin is a refusal, never a truncated plan)."""
@@ -319,14 +357,15 @@ class Replanning(Perception):
                          "it", self.time, self.ego, math.hypot(start[0] - self.pose[0],
                                                                start[1] - self.pose[1]))
                 self.pose = np.array([start[0], start[1], self.pose[2]])
-            # on its lanes, not the junctions' paving beside them: SUMO's drivers see a
-            # vehicle by its lane (taking the paving, more planned vehicles ran into
-            # others in the city's 25 % runs: 38 pairs on ten seeds against 29)
+            # a vehicle that keeps to its lane among SUMO's traffic plans on its lanes,
+            # not on the junctions' paving beside them: SUMO's drivers see a vehicle by
+            # its lane (taking the paving, more planned vehicles ran into others in the
+            # city's 25 % runs: 38 pairs on ten seeds against 29)
             roadmaps, traj = plan_corridor(
                 window, everything, self.pose[:2], float(self.pose[2]),
                 roadmap_params=sc.roadmap, params=self._level3(),
                 start_speed=float(self.v), end_speed=0.0 if final else None,
-                paving=False)
+                paving=not self.keep_lane)
         except RoadBlockedError as err:
             if moving is not None or in_lane:
                 return False, err
@@ -359,6 +398,15 @@ class Replanning(Perception):
                     f"from an obstacle {float(traj.s[bad[0]]):.1f} m ahead")
             log.info("t=%.1f trajectory infeasible %.1f m ahead: driving %.1f m of it",
                      self.time, float(traj.s[bad[0]]), usable)
+        if put_off:
+            sv = np.asarray(traj.speed, dtype=float)
+            brake = np.sqrt(np.maximum(self.v**2 - 2.0 * sc.trajectory.b_max
+                                       * np.asarray(traj.s, dtype=float), 0.0))
+            i = int(np.argmax(brake - sv))
+            if brake[i] - sv[i] > BRAKE_SLACK:
+                return False, _PutOff(f"put off: its curve asks for {float(sv[i]):.1f} m/s "
+                                      f"{float(traj.s[i]):.1f} m ahead, the vehicle drives at "
+                                      f"{self.v:.1f} m/s")
         if self.board:
             traj, roadmaps, everything = self._among_plans(traj, roadmaps, window, everything,
                                                            final)
