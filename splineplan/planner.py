@@ -130,8 +130,9 @@ def plan_corridor(
         tens of milliseconds on a curve that cannot be driven.
     paving
         Whether a segment whose curve is infeasible between the corridor's sides may be
-        planned again on its junctions' paving (:meth:`Corridor.paved`). The closed loop
-        keeps to the lanes, where SUMO's drivers expect a vehicle.
+        planned again on its junctions' paving (:meth:`Corridor.paved`). In the closed
+        loop a vehicle that keeps to its lane among SUMO's traffic plans without it: SUMO's
+        drivers expect it on its lane.
     """
     rp = roadmap_params or RoadmapParams()
     tp = params or TrajectoryParams()
