@@ -203,10 +203,11 @@ def _free_drive(network: Path, start: str, goal: str, out: Path) -> SimResult:
 
 
 def _driven(r: SimResult) -> dict[str, FloatArray]:
+    """The driven path's curvature and accelerations, from the run's trajectory.csv."""
     with (r.out_dir / "trajectory.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     return {k: np.array([float(row[k]) for row in rows])
-            for k in ("t", "speed", "curvature", "a_lon", "a_lat")}
+            for k in ("curvature", "a_lon", "a_lat")}
 
 
 @pytest.mark.parametrize(("start", "goal"), [("C3D3", "B1A1"), ("B2B1", "A3A2"),
