@@ -232,6 +232,11 @@ class RoadNetwork:
             raise UnknownEdgeError(
                 f"edge '{edge_id}' is not in network {self.path.name}{hint}") from None
 
+    def to_node(self, edge_id: str) -> str | None:
+        """The junction that normal edge ``edge_id`` ends at; ``None`` where the network
+        does not record junctions."""
+        return self.to_nodes[self.edge_index(edge_id)] if self.to_nodes else None
+
     def lanes_of(self, edge_id: str) -> tuple[Lane, ...]:
         """Lanes of a normal edge, rightmost first."""
         return self.lanes[self.edge_index(edge_id)]
@@ -692,7 +697,7 @@ def _junction_quads(network: RoadNetwork, from_edge: str, to_edge: str, vclass: 
     lanes (see :func:`_lane_quads`) and the internal lanes of the allowed connections
     between them."""
     polys: list[FloatArray] = []
-    node = network.to_nodes[network.edge_index(from_edge)] if network.to_nodes else None
+    node = network.to_node(from_edge)
     outline = network.junction_shapes.get(node) if node is not None else None
     if outline is not None:
         polys.append(outline)

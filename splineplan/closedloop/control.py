@@ -445,8 +445,8 @@ class Control(Perception):
         """Centre [m] and radius [m] of the bounding circle of the outline of the junction
         that ``edge`` ends at."""
         net = self.net
-        shape = np.asarray(net.junction_shapes.get(net.to_nodes[net.edge_index(edge)],
-                                                   np.zeros((1, 2))), dtype=float)
+        shape = np.asarray(net.junction_shapes.get(net.to_node(edge), np.zeros((1, 2))),
+                           dtype=float)
         centre = shape.mean(axis=0)
         return centre, float(np.max(np.hypot(*(shape - centre).T)))
 
@@ -462,9 +462,7 @@ class Control(Perception):
             if a >= front - STOP_REACH or front < b:
                 edge, kind = next(((e, k) for line, e, k in self._stop_lines if line == a),
                                   ("", ""))
-                net = self.net
-                return kind, (net.to_nodes[net.edge_index(edge)] if edge and net.to_nodes
-                              else "")
+                return kind, (self.net.to_node(edge) or "") if edge else ""
         return "", ""
 
     def _lane_reach(self, lane_id: str, width: float) -> float:

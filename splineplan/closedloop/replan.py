@@ -255,7 +255,7 @@ class Replanning(Perception):
                 msg = why
                 break
             obstacles = self._obstacles_ahead()
-            ok, msg = self._plan(obstacles, put_off=put_off)
+            ok, msg = self._plan(obstacles)  # on the new route: taken as it comes
             if ok:
                 reason = "reroute"
                 detail = why
