@@ -442,18 +442,29 @@ def elongate_for_roadmap(corridor: Corridor, obstacles: Obstacles,
     return obstacles.elongated(corridor.heading_at(corridor.to_sl(centroids)[:, 0]), extra)
 
 
-def _head(tr: Trajectory, n: int, kappa_max: float) -> Trajectory:
-    """The first ``n`` samples of a trajectory; feasible if those samples keep the margin
-    and the turning limit (what fails beyond the join is not driven)."""
-    head = replace(tr, t=tr.t[:n], x=tr.x[:n], y=tr.y[:n], heading=tr.heading[:n],
-                   speed=tr.speed[:n], curvature=tr.curvature[:n], s=tr.s[:n],
-                   clearance_obstacles=tr.clearance_obstacles[:n],
-                   clearance_road=tr.clearance_road[:n])
+def _head(tr: Trajectory, n: int, kappa_max: float, first: int = 0) -> Trajectory:
+    """Samples ``first`` to ``n - 1`` of a trajectory; feasible if those samples keep the
+    margin and the turning limit (what fails outside them is not driven)."""
+    part = slice(first, n)
+    head = replace(tr, t=tr.t[part], x=tr.x[part], y=tr.y[part], heading=tr.heading[part],
+                   speed=tr.speed[part], curvature=tr.curvature[part], s=tr.s[part],
+                   clearance_obstacles=tr.clearance_obstacles[part],
+                   clearance_road=tr.clearance_road[part])
     if tr.feasible:
         return head
     broken = sample_violations(head.s, head.xy, head.curvature, head.clearance_obstacles,
                                head.clearance_road, tr.safety_margin, tr.road_margin, kappa_max)
     return replace(head, feasible=not broken, violations=broken)
+
+
+def continued(tr: Trajectory, first: int, join: int, after: Trajectory,
+              params: TrajectoryParams, start_speed: float, end_speed: float | None
+              ) -> Trajectory:
+    """``tr`` from its sample ``first`` to its sample ``join``, where ``after`` starts, then
+    ``after``: one trajectory, as the corridor's segments are joined (the speed profile run
+    again over the whole, from ``start_speed`` [m/s] to ``end_speed``)."""
+    return _join([_head(tr, join + 1, params.kappa_max, first), after], params, start_speed,
+                 end_speed)
 
 
 def _join(parts: list[Trajectory], tp: TrajectoryParams, start_speed: float,

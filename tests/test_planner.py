@@ -11,7 +11,7 @@ from test_trajectory import assert_wheels_keep_up
 
 from splineplan.corridor import Corridor
 from splineplan.obstacles import Obstacles
-from splineplan.planner import CorridorPlan, plan_corridor
+from splineplan.planner import CorridorPlan, continued, plan_corridor
 from splineplan.roadmap import RoadmapParams
 from splineplan.trajectory import Trajectory, TrajectoryParams
 
@@ -81,6 +81,33 @@ def test_a_start_far_along_the_corridor_plans_from_there(station: float) -> None
     assert tr.feasible and footprint_violations(tr, cor, obs, rp) == (0, 0)
     assert abs(tr.s[-1] - (cor.length - station)) < 0.05 * (cor.length - station)
     assert all(cor.to_sl(rm.xy)[:, 0].min() >= station - 1e-6 for rm in plan.roadmaps)
+
+
+def test_a_plan_goes_on_from_the_current_one_where_it_joins() -> None:
+    """A replan that keeps the current plan up to a join and goes on with a new plan from
+    the join's pose: one trajectory from the vehicle's sample, through the join without a
+    jump in position, heading or speed, its speed profile run again from the vehicle's
+    speed, and feasible (shapely) on the parked-car arc as both parts are."""
+    cor, obs = curved_corridor()
+    rp, tp = RoadmapParams(), TrajectoryParams()
+    start = cor.to_xy(np.array([2.0]), np.array([-3.2]))[0]
+    tr = plan_corridor(cor, obs, start, float(cor.heading_at(2.0)), roadmap_params=rp,
+                       start_speed=8.0).trajectory
+    first, join = 40, 200
+    after = plan_corridor(cor, obs, tr.xy[join], float(tr.heading[join]), roadmap_params=rp,
+                          start_speed=float(tr.speed[join])).trajectory
+    out = continued(tr, first, join, after, tp, 9.0, 0.0)
+    assert np.allclose(out.xy[0], tr.xy[first]) and out.s[0] == 0.0 and out.t[0] == 0.0
+    assert np.allclose(out.xy[: join - first + 1], tr.xy[first:join + 1])
+    assert np.allclose(out.xy[join - first:], after.xy)
+    assert abs(out.s[-1] - (tr.s[join] - tr.s[first] + after.s[-1])) < 1e-6
+    assert np.hypot(np.diff(out.x), np.diff(out.y)).max() < 0.6
+    assert np.abs(np.diff(np.unwrap(out.heading))).max() < 0.05
+    assert out.speed[0] == 9.0 and out.speed[-1] == 0.0
+    dv2 = np.diff(out.speed**2) / (2 * np.maximum(np.diff(out.s), 1e-9))
+    assert dv2.max() <= tp.a_max + 1e-6 and dv2.min() >= -tp.b_max - 1e-6
+    assert out.feasible == (tr.feasible and after.feasible)
+    assert out.feasible and footprint_violations(out, cor, obs, rp) == (0, 0)
 
 
 def footprint_violations(tr: Trajectory, cor: Corridor, obs: Obstacles, rp: RoadmapParams,

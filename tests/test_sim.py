@@ -248,6 +248,23 @@ def test_a_route_planned_feasibly_is_driven_within_the_turning_limit(tmp_path: P
     assert r.metrics["collisions"] == 0 and r.metrics["time_off_road"] == 0.0
 
 
+def test_a_replan_too_late_in_a_bend_goes_on_from_the_current_plan(tmp_path: Path) -> None:
+    """The city, SRS to E3E2, alone: on D3E3, braking for the turn into E3E2 (tighter
+    than the car can take), each routine replan asked for harder braking than ``b_max``
+    and was put off until the plan ran out; the last one keeps the current plan up to
+    where it runs straightest and plans on from there (the replan says where), and the
+    driven path keeps the car's limits."""
+    r = _free_drive(NETS / "city.net.xml", "SRS", "E3E2", tmp_path)
+    assert r.status == "arrived", r.reason
+    joined = [p for p in r.replans if p.ok and "on from the plan" in p.detail]
+    assert joined and all(p.reason == "horizon" for p in joined)
+    tp = load_scenario(SCENARIOS / "city.toml").trajectory
+    d = _driven(r)
+    assert np.abs(d["curvature"]).max() <= 1.02 / tp.min_turn_radius
+    assert np.abs(d["a_lat"]).max() <= 1.05 * tp.mu * tp.g
+    assert r.metrics["collisions"] == 0 and r.metrics["time_off_road"] == 0.0
+
+
 def test_blocked_road_reroutes(runs: dict[str, SimResult]) -> None:
     r = runs["blocked_road"]
     reroutes = [p for p in r.replans if p.reason == "reroute"]

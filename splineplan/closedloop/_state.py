@@ -70,6 +70,7 @@ class DriverState:
     traffic_after: float
     trigger_after: float
     horizon_after: float
+    joined_at: float | None
     others: Others
     board: Any  # Mapping[str, cooperate.Published]: the plans published so far
     priority: int

@@ -108,6 +108,7 @@ class Driver(Replanning, Control):
         self.traffic_after = 0.0  # no traffic replan before this time [s]
         self.trigger_after = 0.0  # no obstacle or traffic check before this time [s]
         self.horizon_after = 0.0  # no routine replan before this time [s]
+        self.joined_at = None  # where the last plan went on from the one before [m]
         self.others = NO_OTHERS
         self.board: Mapping[str, Any] = {}  # the plans others published (the run's board)
         self.priority = 0  # lower plans first (the order of entering)

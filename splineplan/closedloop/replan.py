@@ -68,6 +68,9 @@ _STANDS = 0.05
 #: arrivals (city, 25 % planned, seeds 1 and 3: 30 and 20 arrived in 300 s against 46 and
 #: 28).
 BRAKE_SLACK = 1.0
+#: Least distance [m] from the vehicle, and from the current plan's end, of the point where
+#: a routine replan that is put off may go on from the current plan instead.
+JOIN_AHEAD = 5.0
 #: Share of ``sim.replan_distance`` that the current plan must still reach for a routine
 #: replan to be put off (and never less than the distance to stop in).
 DEFER_REACH = 0.5
@@ -114,6 +117,22 @@ class Replan:
 class _PutOff(SplineplanError):
     """A routine replan whose curve would make the vehicle brake harder than ``b_max``:
     not taken."""
+
+
+def _sharper_bend(new: Any, current: Any, u: float, limit: float) -> str | None:
+    """Why ``new`` is worse than the rest of ``current`` (from its station ``u`` [m]) in
+    curvature: it bends beyond ``limit`` [1/m] and beyond every bend left of ``current``;
+    ``None`` if it does not."""
+    k = np.abs(np.asarray(new.curvature, dtype=float))
+    i = int(np.argmax(k))
+    if k[i] <= limit * (1.0 + 1e-6) or not hasattr(current, "curvature"):
+        return None
+    s = np.asarray(current.s, dtype=float)
+    left = np.abs(np.asarray(current.curvature, dtype=float))[s >= u - 1e-9]
+    if len(left) and k[i] <= float(left.max()) + 1e-6:
+        return None
+    return (f"put off: its curve bends at {k[i]:.3f} 1/m {float(new.s[i]):.1f} m ahead, "
+            f"beyond the turning limit")
 
 
 @dataclass(frozen=True)
@@ -220,10 +239,11 @@ class Replanning(Perception):
         if (self.window_end < self.corridor.length - 1e-6 or self.truncated) and (
                 left < sim.replan_distance) and self.time >= self.horizon_after:
             stop = 0.5 * self.v**2 / self.sc.trajectory.b_max
+            routine = not (self.truncated or self.keep_lane)
+            early = left > max(DEFER_REACH * sim.replan_distance, stop)
             self._replan("horizon", f"{left:.1f} m of the plan left",
-                         obstacles=self._obstacles_ahead(ahead),
-                         put_off=not (self.truncated or self.keep_lane)
-                         and left > max(DEFER_REACH * sim.replan_distance, stop))
+                         obstacles=self._obstacles_ahead(ahead), put_off=routine and early,
+                         join=routine and not early)
 
     def _set_pose_from_sumo(self) -> None:
         """The pose where SUMO has the vehicle (as last perceived)."""
@@ -232,14 +252,15 @@ class Replanning(Perception):
         self.pose = np.array([c[0], c[1], h])
 
     def _replan(self, reason: str, detail: str, *, obstacles: Obstacles | None = None,
-                put_off: bool = False) -> None:
+                put_off: bool = False, join: bool = False) -> None:
         """Plan again (levels 2 and 3, level 1 where the road is found closed). With
-        ``put_off``, a plan that would make the vehicle brake harder than ``b_max`` is not
-        taken (:data:`BRAKE_SLACK`): the vehicle keeps its plan and tries again after
-        :data:`TRIGGER_PERIOD`."""
+        ``put_off``, a plan worse than the current one (:meth:`_worse`) is not taken: the
+        vehicle keeps its plan and tries again after :data:`TRIGGER_PERIOD`. With
+        ``join``, such a plan gives way to one that goes on from the current plan where
+        that is not worse (:meth:`_continued`)."""
         t0 = time.perf_counter()
         obstacles = self._obstacles_ahead() if obstacles is None else obstacles
-        ok, msg = self._plan(obstacles, put_off=put_off)
+        ok, msg = self._plan(obstacles, put_off=put_off, join=join)
         if isinstance(msg, _PutOff):
             elapsed = time.perf_counter() - t0
             self.plan_seconds += elapsed
@@ -266,6 +287,8 @@ class Replanning(Perception):
             self.retry_at = None
             self.stop_at = None
             self.planned_ids = frozenset(obstacles.ids)
+            if self.joined_at is not None:
+                detail += f"; on from the plan {self.joined_at:.1f} m ahead"
             self.replans.append(Replan(self.time, reason, elapsed, station, True, detail))
             log.debug("t=%.1f replan (%s) in %.1f ms", self.time, reason, 1e3 * elapsed)
             return
@@ -287,7 +310,8 @@ class Replanning(Perception):
             return replace(self.sc.trajectory, bend_rounds=0)
         return self.sc.trajectory
 
-    def _plan(self, obstacles: Obstacles, *, put_off: bool = False) -> tuple[bool, Any]:
+    def _plan(self, obstacles: Obstacles, *, put_off: bool = False, join: bool = False
+              ) -> tuple[bool, Any]:
         """Levels 2 and 3 on the window ahead. Returns (ok, error).
 
         Moving vehicles beside the ego (:meth:`_moving_obstacles`) are planned around too
@@ -296,76 +320,39 @@ class Replanning(Perception):
         time-gap speed control. A vehicle that keeps to its lane (``keep_lane``, among
         SUMO's traffic: :mod:`.lanes`) plans within its lane first, where the moving
         vehicles beside it are in other lanes and left to SUMO's drivers and the time gap.
-        With ``put_off``, the first plan made that would make the vehicle brake harder
-        than ``b_max`` ends the search (a :class:`_PutOff` error).
+        With ``put_off``, the first plan made that is worse than the current one
+        (:meth:`_worse`) ends the search (a :class:`_PutOff` error); with ``join``, such a
+        plan may go on from the current one instead.
         """
         if self.keep_lane:
-            ok, err = self._plan_among(obstacles, None, in_lane=True, put_off=put_off)
+            ok, err = self._plan_among(obstacles, None, in_lane=True, put_off=put_off,
+                                       join=join)
             if ok or isinstance(err, _PutOff):
                 return ok, err
             log.debug("t=%.1f no plan within the lane (%s): planning on the whole road",
                       self.time, err)
         moving = self._moving_obstacles()
         if len(moving):
-            ok, err = self._plan_among(obstacles, moving, put_off=put_off)
+            ok, err = self._plan_among(obstacles, moving, put_off=put_off, join=join)
             if ok or isinstance(err, _PutOff):
                 return ok, err
             log.debug("t=%.1f no plan around the traffic beside the ego (%s): planning "
                       "among the stopped obstacles only", self.time, err)
-        return self._plan_among(obstacles, None, put_off=put_off)
+        return self._plan_among(obstacles, None, put_off=put_off, join=join)
 
     def _plan_among(self, obstacles: Obstacles, moving: Obstacles | None, *,
-                    in_lane: bool = False, put_off: bool = False) -> tuple[bool, Any]:
+                    in_lane: bool = False, put_off: bool = False, join: bool = False
+                    ) -> tuple[bool, Any]:
         """Levels 2 and 3 among ``obstacles`` (and ``moving``, or ``in_lane``: within the
         vehicle's lane, :func:`.lanes.lane_band`; both strictly: any failure or a
         trajectory short of the margin is a refusal, never a truncated plan)."""
-        from splineplan.planner import plan_corridor
-
         sc, ego = self.sc, self.sc.ego
         assert self.corridor is not None
-        # a vehicle whose centre lies behind its route's start (SUMO inserts it with its
-        # front on a first edge shorter than itself; its station is then 0) plans on the
-        # route extended back, from a car length behind it
-        behind = 0.0
-        if self.station <= 0.0:
-            behind = max(-float(self.corridor.to_sl(self.pose[None, :2])[0, 0]), 0.0)
-        back = behind + ego.length if behind > 0.0 else 0.0
-        route = self.corridor.extend_back(back)
-        s0 = max(self.station - ego.length, 0.0) - back
-        s1 = self.station + sc.sim.lookahead
-        if len(obstacles):  # reach past every obstacle seen, so a closed road shows at once
-            far = float(self.corridor.to_sl(obstacles.vertices)[:, 0].max())
-            s1 = max(s1, far + ego.length + 2.0 * sc.roadmap.d)
-        s1 = min(s1, self.corridor.length)
-        if s1 - s0 < 2.0 * sc.roadmap.d + ego.length:
-            s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, -back)
-        final = s1 >= self.corridor.length - 1e-6
+        self.joined_at = None
         everything = obstacles if moving is None else obstacles + moving
         try:
-            window = route.slice(s0 + back, s1 + back)
-            if in_lane:
-                width = self._lane_width()
-                if width is None:
-                    return False, TrajectoryError(f"no lanes known for edge "
-                                                  f"'{self._edge_at(self.station)}'")
-                window = lane_band(window, self.station - s0, self.lateral,
-                                   lane_width=width, half_width=ego.width / 2.0,
-                                   **self._lane_links(window))
-            start = onto_road(window, (float(self.pose[0]), float(self.pose[1])))
-            if start is not None:
-                log.info("t=%.1f '%s' is off its corridor: planning from %.2f m away, on "
-                         "it", self.time, self.ego, math.hypot(start[0] - self.pose[0],
-                                                               start[1] - self.pose[1]))
-                self.pose = np.array([start[0], start[1], self.pose[2]])
-            # a vehicle that keeps to its lane among SUMO's traffic plans on its lanes,
-            # not on the junctions' paving beside them: SUMO's drivers see a vehicle by
-            # its lane (taking the paving, more planned vehicles ran into others in the
-            # city's 25 % runs: 38 pairs on ten seeds against 29)
-            roadmaps, traj = plan_corridor(
-                window, everything, self.pose[:2], float(self.pose[2]),
-                roadmap_params=sc.roadmap, params=self._level3(),
-                start_speed=float(self.v), end_speed=0.0 if final else None,
-                paving=not self.keep_lane)
+            roadmaps, traj, window, s1 = self._levels_2_3(obstacles, everything,
+                                                          in_lane=in_lane)
         except RoadBlockedError as err:
             if moving is not None or in_lane:
                 return False, err
@@ -398,15 +385,16 @@ class Replanning(Perception):
                     f"from an obstacle {float(traj.s[bad[0]]):.1f} m ahead")
             log.info("t=%.1f trajectory infeasible %.1f m ahead: driving %.1f m of it",
                      self.time, float(traj.s[bad[0]]), usable)
-        if put_off:
-            sv = np.asarray(traj.speed, dtype=float)
-            brake = np.sqrt(np.maximum(self.v**2 - 2.0 * sc.trajectory.b_max
-                                       * np.asarray(traj.s, dtype=float), 0.0))
-            i = int(np.argmax(brake - sv))
-            if brake[i] - sv[i] > BRAKE_SLACK:
-                return False, _PutOff(f"put off: its curve asks for {float(sv[i]):.1f} m/s "
-                                      f"{float(traj.s[i]):.1f} m ahead, the vehicle drives at "
-                                      f"{self.v:.1f} m/s")
+        why = self._worse(traj) if put_off or join else None
+        if why is not None and put_off:
+            return False, _PutOff(why)
+        if why is not None and usable is None:
+            # the last chance for a routine replan: go on along the current plan to where it
+            # runs straightest, and on from there (as the corridor's segments join)
+            joined = self._continued(obstacles, everything)
+            if joined is not None and self._worse(joined[1]) is None:
+                roadmaps, traj, window, s1, self.joined_at = joined
+        final = s1 >= self.corridor.length - 1e-6
         if self.board:
             traj, roadmaps, everything = self._among_plans(traj, roadmaps, window, everything,
                                                            final)
@@ -420,6 +408,111 @@ class Replanning(Perception):
         else:
             self.own_plan = None
         return True, None
+
+    def _levels_2_3(self, obstacles: Obstacles, everything: Obstacles, *,
+                    in_lane: bool = False,
+                    start: tuple[FloatArray, float, float] | None = None
+                    ) -> tuple[Any, Any, Corridor, float]:
+        """Roadmaps, trajectory, window and the window's end station [m] of a plan among
+        ``everything`` (the stopped ``obstacles`` and any moving ones) from the vehicle's
+        pose, or from ``start`` (a pose ``(3,)`` on the current plan, its station [m] on
+        the route and its speed [m/s])."""
+        from splineplan.planner import plan_corridor
+
+        sc, ego = self.sc, self.sc.ego
+        assert self.corridor is not None
+        station, pose, speed = ((self.station, self.pose, float(self.v)) if start is None
+                                else (start[1], start[0], start[2]))
+        # a vehicle whose centre lies behind its route's start (SUMO inserts it with its
+        # front on a first edge shorter than itself; its station is then 0) plans on the
+        # route extended back, from a car length behind it
+        behind = 0.0
+        if station <= 0.0:
+            behind = max(-float(self.corridor.to_sl(pose[None, :2])[0, 0]), 0.0)
+        back = behind + ego.length if behind > 0.0 else 0.0
+        route = self.corridor.extend_back(back)
+        s0 = max(station - ego.length, 0.0) - back
+        s1 = station + sc.sim.lookahead
+        if len(obstacles):  # reach past every obstacle seen, so a closed road shows at once
+            far = float(self.corridor.to_sl(obstacles.vertices)[:, 0].max())
+            s1 = max(s1, far + ego.length + 2.0 * sc.roadmap.d)
+        s1 = min(s1, self.corridor.length)
+        if s1 - s0 < 2.0 * sc.roadmap.d + ego.length:
+            s0 = max(s1 - 2.0 * sc.roadmap.d - ego.length, -back)
+        final = s1 >= self.corridor.length - 1e-6
+        window = route.slice(s0 + back, s1 + back)
+        if in_lane:
+            width = self._lane_width()
+            if width is None:
+                raise TrajectoryError(f"no lanes known for edge '{self._edge_at(station)}'")
+            window = lane_band(window, station - s0, self.lateral, lane_width=width,
+                               half_width=ego.width / 2.0, **self._lane_links(window))
+        if start is None:
+            on = onto_road(window, (float(pose[0]), float(pose[1])))
+            if on is not None:
+                log.info("t=%.1f '%s' is off its corridor: planning from %.2f m away, on "
+                         "it", self.time, self.ego, math.hypot(on[0] - pose[0], on[1] - pose[1]))
+                self.pose = pose = np.array([on[0], on[1], pose[2]])
+        # a vehicle that keeps to its lane among SUMO's traffic plans on its lanes,
+        # not on the junctions' paving beside them: SUMO's drivers see a vehicle by
+        # its lane (taking the paving, more planned vehicles ran into others in the
+        # city's 25 % runs: 38 pairs on ten seeds against 29)
+        roadmaps, traj = plan_corridor(
+            window, everything, pose[:2], float(pose[2]), roadmap_params=sc.roadmap,
+            params=self._level3(), start_speed=speed, end_speed=0.0 if final else None,
+            paving=not self.keep_lane)
+        return roadmaps, traj, window, s1
+
+    def _worse(self, traj: Any) -> str | None:
+        """Why a routine replan's ``traj`` is not taken, or ``None``: it would make the
+        vehicle brake harder than ``b_max`` (:data:`BRAKE_SLACK`), or it bends beyond the
+        turning limit and beyond what is left of the current plan."""
+        tp = self.sc.trajectory
+        sv = np.asarray(traj.speed, dtype=float)
+        brake = np.sqrt(np.maximum(self.v**2 - 2.0 * tp.b_max * np.asarray(traj.s, dtype=float),
+                                   0.0))
+        i = int(np.argmax(brake - sv))
+        if brake[i] - sv[i] > BRAKE_SLACK:
+            return (f"put off: its curve asks for {float(sv[i]):.1f} m/s "
+                    f"{float(traj.s[i]):.1f} m ahead, the vehicle drives at {self.v:.1f} m/s")
+        return _sharper_bend(traj, self.traj, self.u, tp.kappa_max)
+
+    def _continued(self, obstacles: Obstacles, everything: Obstacles
+                   ) -> tuple[Any, Any, Corridor, float, float] | None:
+        """A plan that drives the current one on to where it runs straightest ahead
+        (:func:`~splineplan.planner.join_indices`, between :data:`JOIN_AHEAD` from the
+        vehicle and as far before its end) and a new plan from there, and the join's
+        distance [m] ahead; ``None`` where the current plan leaves no such stretch or no
+        plan comes out."""
+        from splineplan.planner import continued, join_indices
+
+        tr, corridor = self.traj, self.corridor
+        assert corridor is not None
+        if not hasattr(tr, "curvature"):
+            return None
+        s = np.asarray(tr.s, dtype=float)
+        lo, hi = self.station + JOIN_AHEAD, self.station + (float(s[-1]) - self.u) - JOIN_AHEAD
+        if hi <= lo:
+            return None
+        overlap = 2.0 * (hi - lo)
+        try:
+            j = int(join_indices(tr, corridor, lo - overlap / 4.0, overlap)[0])
+        except TrajectoryError:
+            return None
+        first = max(int(np.searchsorted(s, self.u, side="right")) - 1, 0)
+        if j <= first:
+            return None
+        start = (np.array([tr.x[j], tr.y[j], tr.heading[j]], dtype=float),
+                 self.station + float(s[j]) - self.u, float(tr.speed[j]))
+        try:
+            roadmaps, after, window, s1 = self._levels_2_3(obstacles, everything, start=start)
+        except SplineplanError:
+            return None
+        if np.any(np.asarray(after.clearance_obstacles) < self.sc.roadmap.safety_margin - 1e-6):
+            return None
+        final = s1 >= corridor.length - 1e-6
+        return (roadmaps, continued(tr, first, j, after, self._level3(), float(self.v),
+                                    0.0 if final else None), window, s1, float(s[j]) - self.u)
 
     def _lane_links(self, window: Corridor) -> dict[str, Any]:
         """:func:`.lanes.lane_band`'s ``leads_to`` over ``window``'s edges, by SUMO's
