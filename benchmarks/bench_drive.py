@@ -21,7 +21,9 @@ where the driven route turns back.
 The limits are issue 13's: driven curvature at most ``1 / min_turn_radius`` + 2 %, lateral
 acceleration at most ``mu * g`` + 5 % (the scenario's ``[trajectory]`` parameters), no
 collision, never off the road. Printed per network: routes run, arrived, within each limit,
-all four together, the median wall time per run and the worst value of each with its route;
+all four together (also among the routes that take no turn or bend level 1 finds too tight
+for the car, and among those whose plan from level 1 to 3 is feasible), the median wall
+time per run and the worst value of each with its route;
 ``-v`` a line per route (with the speed where the curvature and the lateral acceleration
 peak). ``--json`` writes every route's record; ``--out`` keeps each run's
 folder (``metrics.json`` says why a run stopped).
@@ -190,6 +192,10 @@ def summary(recs: list[dict[str, Any]]) -> dict[str, Any]:
     out["turning_back"] = len(recs) - len(forward)
     out["forward_all_ok"] = sum(r["all_ok"] for r in forward)
     out["not_as_planned"] = sum(not r["route_as_planned"] for r in recs)
+    fit = [r for r in recs if r.get("too_tight") is False]
+    out["fit"], out["fit_all_ok"] = len(fit), sum(r["all_ok"] for r in fit)
+    feasible = [r for r in recs if r.get("planned_feasible")]
+    out["feasible"], out["feasible_all_ok"] = len(feasible), sum(r["all_ok"] for r in feasible)
     out["median_wall_time"] = statistics.median(r["wall_time"] for r in recs) if recs else None
     for key in ("max_curvature", "max_lateral_acceleration", "collisions", "time_off_road"):
         have = sorted((r[key], r["index"]) for r in recs if r[key] is not None)
@@ -229,6 +235,9 @@ def summary_lines(name: str, s: dict[str, Any], limits: tuple[float, float]) -> 
         f"  driven route not the planned one (a re-route): {s['not_as_planned']}; it turns "
         f"back: {s['turning_back']}, all four among the other "
         f"{n - s['turning_back']}: {s['forward_all_ok']}",
+        f"  all four among the {s['fit']} that take no turn or bend too tight for the car: "
+        f"{s['fit_all_ok']}; among the {s['feasible']} whose plan from level 1 to 3 is "
+        f"feasible: {s['feasible_all_ok']}",
         f"  worst: curvature {worst('max_curvature', '.3f', ' 1/m')} (limit {limits[0]:.3f}), "
         f"lateral acceleration {worst('max_lateral_acceleration', '.2f', ' m/s^2')} (limit "
         f"{limits[1]:.2f}), collisions {worst('collisions', 'd', '')}, off road "
@@ -256,6 +265,8 @@ def bench_network(name: str, path: Path, shortest: float, n_routes: int, seed: i
         rec: dict[str, Any] = {
             "index": i, "from_edge": r.from_edge, "to_edge": r.to_edge, "length": r.length,
             "planned_feasible": None if r.plan is None else bool(r.plan.trajectory.feasible),
+            "too_tight": None if r.plan is None else bool(r.plan.route.tight_turns
+                                                          or r.plan.route.tight_bends),
             "route_planned": planned}
         start_len = net.length_of(r.from_edge)
         if start_len < base.ego.length:  # the closed loop needs the car on its start edge
