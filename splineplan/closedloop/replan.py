@@ -63,13 +63,14 @@ _STANDS = 0.05
 #: current plan reaches at least :data:`DEFER_REACH` of the replan distance ahead: a new
 #: curve leaves the vehicle straight along its heading, so one made inside a bend must
 #: turn harder soon after, and the vehicle would brake at its emergency rate along a kink.
-#: It drives on along its plan instead and plans again every :data:`TRIGGER_PERIOD`. Not
-#: for a vehicle that keeps to its lane among SUMO's traffic: there the plans put off cost
-#: arrivals (city, 25 % planned, seeds 1 and 3: 30 and 20 arrived in 300 s against 46 and
-#: 28).
+#: It drives on along its plan instead and plans again every :data:`TRIGGER_PERIOD`. So is
+#: one whose curve bends beyond the turning limit and beyond what is left of the current
+#: plan. Not for a vehicle that keeps to its lane among SUMO's traffic: there the plans
+#: put off cost arrivals (city, 25 % planned, seeds 1 and 3: 30 and 20 arrived in 300 s
+#: against 46 and 28).
 BRAKE_SLACK = 1.0
 #: Least distance [m] from the vehicle, and from the current plan's end, of the point where
-#: a routine replan that is put off may go on from the current plan instead.
+#: the last try of a routine replan that is still worse goes on from the current plan.
 JOIN_AHEAD = 5.0
 #: Share of ``sim.replan_distance`` that the current plan must still reach for a routine
 #: replan to be put off (and never less than the distance to stop in).
@@ -95,7 +96,8 @@ class Replan:
         road closed), ``cooperation`` (again while waiting for another planned vehicle's
         published plan), ``retry`` (after a failed plan) or ``put off`` (a ``horizon``
         replan not taken, whose curve would make the vehicle brake harder than
-        ``b_max``: :data:`BRAKE_SLACK`).
+        ``b_max`` (:data:`BRAKE_SLACK`) or bend beyond the turning limit and beyond
+        what is left of the current plan).
     planning_time
         Wall time [s] of the planning (levels 1 to 3 as needed).
     station
