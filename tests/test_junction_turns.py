@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from benchmarks.kinematic_oracle import Car, Search, drive
 from benchmarks.turns import TurnBuilder, outside, turns_of
 from splineplan.errors import ParameterError
-from splineplan.network import CarShape, RoadNetwork, load_network, turn_fits
+from splineplan.network import CarShape, RoadNetwork, bend_fits, load_network, turn_fits
 from splineplan.pipeline import plan
 from splineplan.route import shortest_route
 
@@ -149,6 +149,31 @@ def test_a_route_that_must_take_a_tight_turn_says_so(tight: Path, caplog) -> Non
         route = shortest_route(net, "xa", "bc", car=CarShape())
     assert route.edges == ("xa", "ab", "bc") and route.tight_turns == (("ab", "bc"),)
     assert "'ab'" in caplog.text and "'bc'" in caplog.text and "junction 'b'" in caplog.text
+
+
+def test_a_lane_kinked_just_before_its_junction_is_a_turn_too_tight(tmp_path: Path) -> None:
+    """ab's single lane runs east and turns north by 90 degrees 10 m before junction b,
+    where bc goes on north: the turn at b is straight, and the kink lies within
+    ``BEND_LEAD`` of ab's end, where :func:`bend_fits` leaves it to the junction. The
+    oracle cannot drive it inside the paving; level 1 now says the turn is too tight."""
+    (tmp_path / "n.nod.xml").write_text(
+        '<nodes><node id="a" x="0" y="0"/><node id="b" x="95" y="10"/>'
+        '<node id="c" x="95" y="110"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text(
+        '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="13.89" '
+        'shape="0,0 95,0 95,10"/><edge id="bc" from="b" to="c" numLanes="1" '
+        'speed="13.89"/></edges>')
+    out = tmp_path / "kink.net.xml"
+    subprocess.run(["netconvert", "-n", str(tmp_path / "n.nod.xml"), "-e",
+                    str(tmp_path / "n.edg.xml"), "--no-turnarounds", "-o", str(out)],
+                   check=True, capture_output=True)
+    net = load_network(out)
+    turn = TurnBuilder(out).turn("ab", "bc")
+    assert not drive(turn.window, [], turn.start, turn.goal, margin=0.0, search=SEARCH).found
+    assert bend_fits(net, "ab", "passenger", CarShape())  # the edge's own test: near b
+    assert not turn_fits(net, "ab", "bc", "passenger", CarShape())
+    route = shortest_route(net, "ab", "bc", car=CarShape())
+    assert route.tight_turns == (("ab", "bc"),)
 
 
 def test_level_1_keeps_every_turn_of_the_grid() -> None:
