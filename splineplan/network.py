@@ -1550,24 +1550,19 @@ def _kinks_fit(network: RoadNetwork, from_edge: str, to_edge: str, conn: Connect
     paving, and so are bends within :data:`KINK_GAP` of the junction."""
     lane_in = network.lanes_of(from_edge)[conn.from_lane]
     lane_out = network.lanes_of(to_edge)[conn.to_lane]
-    tail = _polyline_part(lane_in.shape, from_end=True)
-    head = _polyline_part(lane_out.shape, from_end=False)
-    via = _via_shape(network, conn.via)
-    line = dedupe_polyline(np.concatenate((tail, via, head)))
+    tail = _tail(lane_in.shape, 2.0 * BEND_LEAD)
+    head = _tail(lane_out.shape[::-1], 2.0 * BEND_LEAD)[::-1]
+    line = dedupe_polyline(np.concatenate((tail, _via_shape(network, conn.via), head)))
     if len(line) < 3:
         return True
     st = polyline_stations(line)
     a, b = polyline_stations(tail)[-1], st[-1] - polyline_stations(head)[-1]
-    width = min(lane_in.width, lane_out.width)
-    play = width - car.swept_width
-    for first, last, turn in _bend_runs(line):
+    lane = replace(lane_in, width=min(lane_in.width, lane_out.width))
+    for first, last, turn in _sharp(line, st, lane.width - car.swept_width, car):
         # a lane's own bend, not the turn's, and far enough from the junction's outline
         gap = a - st[last] if st[last] < a - 1e-6 else st[first] - b
-        if (gap >= KINK_GAP and abs(turn) >= FIT_STRAIGHT
-                and _kink_radius(play, abs(turn)) < 2.0 * car.min_turn_radius
-                and st[first] >= BEND_LEAD and st[-1] - st[last] >= BEND_LEAD
-                and not _run_fits(line, st, [replace(lane_in, width=width)],
-                                  float(st[first]), float(st[last]), turn, car)):
+        if gap >= KINK_GAP and not _run_fits(line, st, [lane], float(st[first]),
+                                             float(st[last]), turn, car):
             return False
     return True
 
@@ -1578,21 +1573,6 @@ def _kinks_fit(network: RoadNetwork, from_edge: str, to_edge: str, conn: Connect
 #: whose bend lies 0.3-2.3 m from the junction, and none of the 18 whose bend lies
 #: 1.9 m or further.
 KINK_GAP = 1.75
-
-
-def _polyline_part(shape: FloatArray, *, from_end: bool) -> FloatArray:
-    """The last (``from_end``) or first ``2 * BEND_LEAD`` metres of a polyline."""
-    pts = dedupe_polyline(shape)
-    if from_end:
-        pts = pts[::-1]
-    st = polyline_stations(pts)
-    keep = int(np.searchsorted(st, 2.0 * BEND_LEAD, side="left")) + 1
-    part = pts[:keep].copy()
-    if st[-1] > 2.0 * BEND_LEAD and keep >= 2:
-        k = keep - 1
-        f = (2.0 * BEND_LEAD - st[k - 1]) / max(st[k] - st[k - 1], 1e-12)
-        part[-1] = pts[k - 1] + f * (pts[k] - pts[k - 1])
-    return part[::-1] if from_end else part
 
 
 def _turned(poses: list[tuple[FloatArray, FloatArray]]) -> list[tuple[FloatArray, FloatArray]]:
@@ -1771,12 +1751,17 @@ def sharp_runs(lanes: list[Lane], car: CarShape
     if len(ref) < 3:
         return ref, np.zeros(len(ref)), []
     st = polyline_stations(ref)
-    play = sum(ln.width for ln in lanes) - car.swept_width
-    runs = [(first, last, turn) for first, last, turn in _bend_runs(ref)
+    return ref, st, _sharp(ref, st, sum(ln.width for ln in lanes) - car.swept_width, car)
+
+
+def _sharp(ref: FloatArray, st: FloatArray, play: float, car: CarShape
+           ) -> list[tuple[int, int, float]]:
+    """The runs of :func:`_bend_runs` of the polyline ``ref`` (stations ``st``) that
+    :func:`sharp_runs` keeps, with ``play`` [m] of lateral room for the car's centre."""
+    return [(first, last, turn) for first, last, turn in _bend_runs(ref)
             if abs(turn) >= FIT_STRAIGHT
             and _kink_radius(play, abs(turn)) < 2.0 * car.min_turn_radius
             and st[first] >= BEND_LEAD and st[-1] - st[last] >= BEND_LEAD]
-    return ref, st, runs
 
 
 def _run_fits(ref: FloatArray, st: FloatArray, lanes: list[Lane], s_first: float,

@@ -493,8 +493,7 @@ def plot_turn(
     top = s_max if s_max is not None else tp.s_max
     kmax = kappa_max if kappa_max is not None else tp.kappa_max
     tr, corridor, edges = plan.trajectory, plan.corridor, tuple(plan.route.edges)
-    nodes = [network.to_node(e) for e in edges[:-1]] if network.to_nodes else []
-    jid = junction if junction is not None else (nodes[0] if nodes else None)
+    jid = junction if junction is not None or len(edges) < 2 else network.to_node(edges[0])
     shape = network.junction_shapes.get(jid) if jid is not None else None
     fig = Figure(figsize=(11.0, 5.6), layout="constrained")
     ax, axk = fig.subplots(1, 2, width_ratios=(1.35, 1.0))

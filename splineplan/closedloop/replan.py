@@ -117,17 +117,18 @@ class Replan:
 
 
 class _PutOff(SplineplanError):
-    """A routine replan whose curve would make the vehicle brake harder than ``b_max``:
-    not taken."""
+    """A routine replan worse than the current plan (:meth:`Replanning._worse`): not
+    taken."""
 
 
 def _sharper_bend(new: Any, current: Any, u: float, limit: float) -> str | None:
-    """Why ``new`` is worse than the rest of ``current`` (from its station ``u`` [m]) in
+    """Why ``new`` is worse than the rest of ``current`` (a whole trajectory, never a
+    truncated one: routine replans are not judged after one) from its station ``u`` [m] in
     curvature: it bends beyond ``limit`` [1/m] and beyond every bend left of ``current``;
     ``None`` if it does not."""
     k = np.abs(np.asarray(new.curvature, dtype=float))
     i = int(np.argmax(k))
-    if k[i] <= limit * (1.0 + 1e-6) or not hasattr(current, "curvature"):
+    if k[i] <= limit * (1.0 + 1e-6):
         return None
     s = np.asarray(current.s, dtype=float)
     left = np.abs(np.asarray(current.curvature, dtype=float))[s >= u - 1e-9]
@@ -488,10 +489,8 @@ class Replanning(Perception):
         plan comes out."""
         from splineplan.planner import continued, join_indices
 
-        tr, corridor = self.traj, self.corridor
+        tr, corridor = self.traj, self.corridor  # not truncated: a whole Trajectory
         assert corridor is not None
-        if not hasattr(tr, "curvature"):
-            return None
         s = np.asarray(tr.s, dtype=float)
         lo, hi = self.station + JOIN_AHEAD, self.station + (float(s[-1]) - self.u) - JOIN_AHEAD
         if hi <= lo:
