@@ -23,7 +23,7 @@ import numpy as np
 from benchmarks.kinematic_oracle import Search, drive
 from benchmarks.turns import Turn, TurnBuilder, outside, random_turns, turns_of
 from splineplan.corridor import Corridor
-from splineplan.network import CarShape, turn_fits
+from splineplan.network import CarShape, searched_path, turn_fits
 
 ROOT = Path(__file__).resolve().parent.parent
 MONACO = ROOT.parent / "shared" / "data" / "monaco.net.xml.gz"
@@ -75,8 +75,9 @@ def run_turn(net: object, builder: TurnBuilder, a: str, b: str) -> dict[str, obj
     in_corridor = None
     if found and verdict == "infeasible":
         in_corridor = _drives_in_corridor(p.corridor, turn)
+    limit = searched_path(net, a, b, "passenger", CarShape()) is not None  # type: ignore[arg-type]
     return {"turn": (a, b), "junction": turn.junction, "drivable": found, "fits": fits,
-            "verdict": verdict, "outside": out, "why": why, "route": routed,
+            "limit": limit, "verdict": verdict, "outside": out, "why": why, "route": routed,
             "in_corridor": in_corridor, "t_oracle": t_oracle, "t_plan": t_plan,
             "t_fits": t_fits}
 
@@ -141,6 +142,11 @@ def bench(name: str, path: Path, pairs: list[tuple[str, str]], verbose: bool
           f"{sum(not r['fits'] for r in rows if not r['drivable'])} known to level 1; "
           f"drivable turns avoided by level 1: {len(avoided)}; median test time "
           f"{1e3 * t_f:.2f} ms (first use, then cached)", flush=True)
+    limit = [r for r in rows if r.get("limit")]
+    if limit:
+        print(f"  level 1 found {len(limit)} turns only by its search (at the turning limit): "
+              f"the oracle drives {sum(bool(r['drivable']) for r in limit)}, the planner plans "
+              f"{sum(r['verdict'] == 'feasible' for r in limit)} feasibly", flush=True)
     return rows
 
 

@@ -539,7 +539,8 @@ def _build_graph(net: RoadNetwork, vclass: str) -> ClassGraph:
 
 # ---- corridor adapter ---------------------------------------------------------------------
 
-def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = None) -> Corridor:
+def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = None,
+                   car: CarShape | None = None) -> Corridor:
     """The drivable area of a route as a :class:`~splineplan.corridor.Corridor`.
 
     On each route edge the area spans from the right side of its rightmost lane that
@@ -566,6 +567,11 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         A :class:`splineplan.route.Route` (anything with ``edges`` and ``vclass``).
     vclass
         Vehicle class; defaults to the route's.
+    car
+        The car: through a junction turn that it can make only on a path that
+        :func:`turn_fits` found by a search (:func:`turn_path`), the corridor's reference
+        follows that path, its sides :data:`PATH_ROOM` beyond the car's, cut to the
+        paving.
     """
     cls = vclass if vclass is not None else getattr(route, "vclass", "passenger")
     check_vclass(cls)
@@ -594,6 +600,12 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         if i + 1 < len(edges):
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
+            path = searched_path(network, eid, edges[i + 1], cls, car) if car else None
+            if path is not None:
+                half = car.width / 2.0 + PATH_ROOM  # type: ignore[union-attr]
+                pieces.append((path[:, :2], np.full(len(path), half),
+                               np.full(len(path), -half)))
+                continue
             dst = list(network.allowed_lanes(edges[i + 1], cls))
             fillet = _cached_junction_band(network, lanes, dst) if dst else None
             if fillet is not None:
@@ -1476,7 +1488,7 @@ def turn_fits(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
     the junction and the internal lanes of the allowed connections), once per network
     and car.
 
-    A cheap geometric test, not a search: the car drives forward on a path of an arc, a
+    First a cheap geometric test: the car drives forward on a path of an arc, a
     straight and an arc (a Dubins path turning one way, at 1, 1.25 or 1.6 turning radii)
     from a pose on a connection's incoming lane (its centre or either side the car fits
     in, at the lane's end or 4 m before it, heading along the lane or turned by
@@ -1486,9 +1498,11 @@ def turn_fits(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
     the path). Turns without internal lanes fit without a test; turns of less than
     :data:`FIT_STRAIGHT` and turns whose internal lanes bend gently enough
     (:data:`EASY_RADIUS`) need no paths, but the lanes' own sharp bends near the junction
-    must fit (:func:`_kinks_fit`). Paths that change their radius are not tried, so a
-    driver (or the kinematic oracle) makes some turns this test refuses; on 200 random
-    Monaco turns it agrees with the oracle on 180 (see ``benchmarks/RESULTS.md``).
+    must fit (:func:`_kinks_fit`). Where no such path keeps to the paving, a search
+    (:func:`turn_path`) looks for one that swings wide or changes its radius, as a driver
+    does at the turning limit; the turn fits where it finds one (:func:`searched_path`
+    then names it). On 200 random Monaco turns the two agree with the kinematic oracle on
+    193 (the Dubins paths alone on 180; see ``benchmarks/RESULTS.md``).
     """
     key = ("fits", from_edge, to_edge, vclass, repr(car))
     if key not in network._bands:
@@ -1535,7 +1549,73 @@ def _turn_fits(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
             if _any_path_paved(batch, paving, car):
                 return True
             batch = []
-    return bool(batch) and _any_path_paved(batch, paving, car)
+    if batch and _any_path_paved(batch, paving, car):
+        return True
+    return turn_path(network, from_edge, to_edge, vclass, car) is not None
+
+
+#: Where the search of :func:`turn_path` starts on an incoming lane, before its end, and
+#: the stretch of an outgoing lane [m] after its start where it may end.
+PATH_BEFORE = 8.0
+PATH_AFTER = (2.0, 8.0)
+
+
+#: Room [m] each side of the car that a corridor gives around a searched path through a
+#: junction (see :func:`route_corridor`), before it is cut to the paving.
+PATH_ROOM = 0.3
+
+
+def searched_path(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
+                  car: CarShape) -> FloatArray | None:
+    """The path of :func:`turn_path` where the car makes the turn only on it (it fits by
+    no simpler test of :func:`turn_fits`), else ``None``."""
+    if not turn_fits(network, from_edge, to_edge, vclass, car):
+        return None
+    path: FloatArray | None = network._bands.get(("path", from_edge, to_edge, vclass,
+                                                  repr(car)))
+    return path
+
+
+def turn_path(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
+              car: CarShape) -> FloatArray | None:
+    """A path the car can drive through the turn's paving (:func:`turn_fits`' paving),
+    found by a search (:func:`splineplan.turnpath.search`): poses ``(n, 3)`` (x, y [m],
+    heading [rad]) from :data:`PATH_BEFORE` metres before the end of a connection's
+    incoming lane (on its centre line or as far to either side as the car fits) to its
+    outgoing lane, within :data:`PATH_AFTER` of its start, heading along it; ``None``
+    where there is none. Once per network and car."""
+    key = ("path", from_edge, to_edge, vclass, repr(car))
+    if key not in network._bands:
+        network._bands[key] = _turn_path(network, from_edge, to_edge, vclass, car)
+    path: FloatArray | None = network._bands[key]
+    return path
+
+
+def _turn_path(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
+               car: CarShape) -> FloatArray | None:
+    from splineplan.turnpath import search
+
+    conns = [c for c in network.connections_between(from_edge, to_edge, vclass=vclass)
+             if c.via]
+    if not conns:
+        return None
+    starts, goals, tol = [], [], []
+    for i in sorted({c.from_lane for c in conns}):
+        lane = network.lanes_of(from_edge)[i]
+        for p, d in _lane_poses(lane, car, end=True, at=PATH_BEFORE):
+            starts.append((p[0], p[1], math.atan2(d[1], d[0])))
+    for j in sorted({c.to_lane for c in conns}):
+        lane = network.lanes_of(to_edge)[j]
+        room = max((lane.width - car.width) / 2.0, 0.25)
+        for at in np.arange(PATH_AFTER[0], PATH_AFTER[1] + 1e-9, 0.5):
+            for p, d in _lane_poses(lane, car, end=False, at=float(at))[:1]:
+                goals.append((p[0], p[1], math.atan2(d[1], d[0])))
+                tol.append(room)
+    if not starts or not goals:
+        return None
+    polys = _paving(network, (from_edge, to_edge), vclass)
+    return search(polys, np.array(starts), np.array(goals), np.array(tol),
+                  length=car.length, width=car.width, kappa_max=1.0 / car.min_turn_radius)
 
 
 def _kinks_fit(network: RoadNetwork, from_edge: str, to_edge: str, conn: Connection,

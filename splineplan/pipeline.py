@@ -27,18 +27,19 @@ import logging
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
 from splineplan.corridor import Corridor
 from splineplan.errors import NoRouteError, ParameterError, RoadBlockedError
-from splineplan.network import CarShape, RoadNetwork, route_corridor
+from splineplan.network import CarShape, RoadNetwork, route_corridor, searched_path
 from splineplan.obstacles import Obstacles
 from splineplan.planner import plan_corridor
 from splineplan.roadmap import Roadmap, RoadmapParams
 from splineplan.route import Route, forward_route, is_turnaround
-from splineplan.trajectory import Trajectory, TrajectoryParams
+from splineplan.trajectory import Trajectory, TrajectoryParams, _less_violating
 
 log = logging.getLogger(__name__)
 
@@ -146,19 +147,11 @@ def plan(
         _check_end_pos(network, from_edge, to_edge, start_pos, end_pos)
     avoided = list(avoid)
     blocked: list[str] = []
-    t_route = t_roadmap = t_traj = 0.0
     last: RoadBlockedError | None = None
-    while True:
-        t0 = time.perf_counter()
-        try:
-            route = forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                                  avoid=avoided, start_pos=start_pos, car=car)
-        except NoRouteError as err:
-            if last is None:
-                raise
-            raise RoadBlockedError(f"{last}; no other route: {err}", station=last.station,
-                                   edge=last.edge, junction=last.junction) from err
-        corridor = route_corridor(network, route, vclass=vclass)
+    clock = [0.0, 0.0, 0.0]  # level 1 (and the corridors), level 2, level 3 [s]
+
+    def along(route: Route, corridor: Corridor) -> tuple[Route, Corridor, Any]:
+        """Levels 2 and 3 on the route's ``corridor``, cut to the plan's end."""
         xy = (corridor.to_xy(start_pos, 0.0) if start_xy is None
               else np.asarray(start_xy, dtype=float).reshape(2))
         end = corridor.length if end_pos is None else end_station(network, corridor, end_pos)
@@ -169,15 +162,61 @@ def plan(
                 least=float(corridor.to_sl(xy)[0, 0]) + rp.vehicle_length))
         if end_pos is not None or end < corridor.length:
             corridor = corridor.slice(0.0, end)
-        back = {(route.edges[i], route.edges[i + 1]) for i in turnarounds(network, route)}
-        t_route += time.perf_counter() - t0
         heading = (float(corridor.heading_at(corridor.to_sl(xy)[0, 0]))
                    if start_heading is None else start_heading)
+        back = {(route.edges[i], route.edges[i + 1]) for i in turnarounds(network, route)}
+        result = plan_corridor(corridor, obstacles, xy, heading,
+                               roadmap_params=roadmap_params, params=trajectory_params,
+                               start_speed=start_speed, end_speed=end_speed,
+                               turnarounds=back)
+        clock[1] += result.roadmap_seconds
+        clock[2] += result.trajectory_seconds
+        return route, corridor, result
+
+    def routed(avoid_limit_turns: bool = False) -> Route:
+        t0 = time.perf_counter()
         try:
-            result = plan_corridor(corridor, obstacles, xy, heading,
-                                   roadmap_params=roadmap_params, params=trajectory_params,
-                                   start_speed=start_speed, end_speed=end_speed,
-                                   turnarounds=back)
+            return forward_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
+                                 avoid=avoided, start_pos=start_pos, car=car,
+                                 avoid_limit_turns=avoid_limit_turns)
+        finally:
+            clock[0] += time.perf_counter() - t0
+
+    def corridor_of(route: Route, path: bool = False) -> Corridor:
+        t0 = time.perf_counter()
+        corridor = route_corridor(network, route, vclass=vclass, car=car if path else None)
+        clock[0] += time.perf_counter() - t0
+        return corridor
+
+    while True:
+        try:
+            route = routed()
+        except NoRouteError as err:
+            if last is None:
+                raise
+            raise RoadBlockedError(f"{last}; no other route: {err}", station=last.station,
+                                   edge=last.edge, junction=last.junction) from err
+        try:
+            best = along(route, corridor_of(route))
+            if not best[2].trajectory.feasible and _searched(network, route, car):
+                # a turn the car makes only at its turning limit: along the path level 1
+                # found for it, then by a route without such turns; the better plan
+                for how in ("path", "route"):
+                    try:
+                        if how == "path":
+                            other = along(route, corridor_of(route, path=True))
+                        else:
+                            again = routed(avoid_limit_turns=True)
+                            if again.edges == route.edges:
+                                continue
+                            other = along(again, corridor_of(again))
+                    except (RoadBlockedError, NoRouteError):
+                        continue
+                    if _less_violating(best[2].trajectory, other[2].trajectory,
+                                       tp) is not best[2].trajectory:
+                        best = other
+                    if best[2].trajectory.feasible:
+                        break
         except RoadBlockedError as err:
             edge = err.closed_edge
             if edge is None or edge in (from_edge, to_edge) or edge in avoided or \
@@ -188,9 +227,16 @@ def plan(
             blocked.append(edge)
             avoided.append(edge)
             continue
+        route, corridor, result = best
         return Plan(route, corridor, tuple(result.roadmaps), result.trajectory,
-                    tuple(blocked), t_route, t_roadmap + result.roadmap_seconds,
-                    t_traj + result.trajectory_seconds)
+                    tuple(blocked), clock[0], clock[1], clock[2])
+
+
+def _searched(network: RoadNetwork, route: Route, car: CarShape) -> bool:
+    """Whether the route takes a junction turn that the car makes only on a path level 1
+    searched for (:func:`~splineplan.network.searched_path`)."""
+    return any(searched_path(network, a, b, route.vclass, car) is not None
+               for a, b in itertools.pairwise(route.edges))
 
 
 def end_station(network: RoadNetwork, corridor: Corridor, end_pos: float) -> float:

@@ -18,6 +18,7 @@ Choices that make the pictures readable (see README.md, "Figures"):
 
 from __future__ import annotations
 
+import itertools
 import logging
 import math
 import textwrap
@@ -41,7 +42,7 @@ from matplotlib.patches import Patch, Rectangle
 
 if TYPE_CHECKING:
     from splineplan.corridor import Corridor
-    from splineplan.network import RoadNetwork
+    from splineplan.network import CarShape, RoadNetwork
     from splineplan.obstacles import Obstacles
     from splineplan.roadmap import Roadmap
     from splineplan.route import Route
@@ -456,6 +457,7 @@ def plot_turn(
     margin: float = 25.0,
     s_max: float | None = None,
     kappa_max: float | None = None,
+    car: CarShape | None = None,
     path: str | PathLike[str] | None = None,
     title: str | None = None,
 ) -> Any:
@@ -478,15 +480,20 @@ def plot_turn(
     s_max, kappa_max
         Top of the speed colour scale [m/s] and the turning limit [1/m] (defaults: those of
         :class:`~splineplan.trajectory.TrajectoryParams`).
+    car
+        The car whose turn it is (default :class:`~splineplan.network.CarShape`'s): where
+        level 1 found the turn only by its search, that path is drawn.
 
     Returns
     -------
     The figure; artists with gids ``drivable_area``, ``paved_area`` (the junctions'
     paving beside the corridor's lanes, where the corridor knows it), ``junction``,
     ``lanes``,
-    ``internal_lanes``, ``swept``, ``trajectory_speed``, ``violations`` (where the curve
-    breaks a limit), ``curvature`` and ``kappa_max``.
+    ``internal_lanes``, ``searched_path`` (where level 1 found the turn only by its
+    search), ``swept``, ``trajectory_speed``, ``violations`` (where the curve breaks a
+    limit), ``curvature`` and ``kappa_max``.
     """
+    from splineplan.network import CarShape, searched_path
     from splineplan.trajectory import TrajectoryParams
 
     tp = TrajectoryParams()
@@ -523,6 +530,13 @@ def plot_turn(
         ring = np.vstack((shape, shape[:1]))
         ax.plot(ring[:, 0], ring[:, 1], color="#333333", lw=1.4, zorder=2, gid="junction",
                 label=f"junction {jid} (SUMO's outline)")
+    found = [p for a, b in itertools.pairwise(edges) if network.to_node(a) == jid
+             for p in [searched_path(network, a, b, plan.route.vclass, car or CarShape())]
+             if p is not None]
+    for p in found[:1]:
+        ax.plot(p[:, 0], p[:, 1], color="#6a1b9a", lw=1.2, ls=(0, (4, 2)), zorder=5,
+                gid="searched_path",
+                label="path level 1 searched for the car (at its turning limit)")
     for i, rm in enumerate(plan.roadmaps):
         ax.plot(rm.xy[:, 0], rm.xy[:, 1], ls="none", marker="o", ms=2.5,
                 color=PLAN_COLOURS["graph"], zorder=4, gid="roadmap_path",

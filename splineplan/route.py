@@ -25,7 +25,14 @@ import numpy as np
 
 from splineplan.errors import NoRouteError, ParameterError, VehicleClassError
 from splineplan.geometry import FloatArray
-from splineplan.network import CarShape, ClassGraph, RoadNetwork, bend_fits, turn_fits
+from splineplan.network import (
+    CarShape,
+    ClassGraph,
+    RoadNetwork,
+    bend_fits,
+    searched_path,
+    turn_fits,
+)
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +100,7 @@ def shortest_route(
     start_pos: float = 0.0,
     turnarounds: bool = True,
     car: CarShape | None = None,
+    avoid_limit_turns: bool = False,
 ) -> Route:
     """The least-cost route from ``from_edge`` to ``to_edge`` for vehicle class ``vclass``.
 
@@ -123,6 +131,10 @@ def shortest_route(
         cached per network and car: it is the least-cost route without them where one
         exists; where none does, the least-cost route, with a logged warning and
         :attr:`Route.tight_turns` and :attr:`Route.tight_bends` naming them.
+    avoid_limit_turns
+        With ``car``: avoid also the turns the car makes only on a path that level 1
+        searched for, at its turning limit (:func:`~splineplan.network.searched_path`),
+        where a route without them exists.
 
     Raises
     ------
@@ -163,8 +175,14 @@ def shortest_route(
     tight: list[tuple[int, int]] = []
     bends: list[int] = []
     if path is not None and car is not None:
-        path, tight, bends = _without_tight_turns(network, vclass, car, adjacency, path,
-                                                  blocked, potential)
+        # with avoid_limit_turns, turns the car makes only at its turning limit are
+        # avoided too where a route does; where none does, only those it cannot make
+        found = _without_tight_turns(network, vclass, car, adjacency, path, blocked,
+                                     potential, hard=avoid_limit_turns)
+        if found[1] and avoid_limit_turns:
+            found = _without_tight_turns(network, vclass, car, adjacency, path, blocked,
+                                         potential)
+        path, tight, bends = found
     if path is None:
         msg = (f"no route from edge '{from_edge}' to edge '{to_edge}' "
                f"for vehicle class '{vclass}'")
@@ -208,17 +226,20 @@ def forward_route(
     avoid: Iterable[str] = (),
     start_pos: float = 0.0,
     car: CarShape | None = None,
+    avoid_limit_turns: bool = False,
 ) -> Route:
     """The route a planner that drives forward takes: :func:`shortest_route` without
     turnarounds, or with them where every route has one (a dead end); the arguments as
     there."""
     try:
         return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos, turnarounds=False, car=car)
+                              avoid=avoid, start_pos=start_pos, turnarounds=False, car=car,
+                              avoid_limit_turns=avoid_limit_turns)
     except NoRouteError:
         log.info("every route %s -> %s turns around: taking the shortest", from_edge, to_edge)
         return shortest_route(network, from_edge, to_edge, vclass=vclass, weight=weight,
-                              avoid=avoid, start_pos=start_pos, car=car)
+                              avoid=avoid, start_pos=start_pos, car=car,
+                              avoid_limit_turns=avoid_limit_turns)
 
 
 #: Routes :func:`_without_tight_turns` tries before it keeps the tight turns and bends.
@@ -228,15 +249,16 @@ MAX_TIGHT_DETOURS = 16
 def _without_tight_turns(
     network: RoadNetwork, vclass: str, car: CarShape,
     adjacency: list[list[tuple[int, float]]], path: list[int], blocked: set[int],
-    potential: list[float],
+    potential: list[float], *, hard: bool = False,
 ) -> tuple[list[int], list[tuple[int, int]], list[int]]:
     """The least-cost path without turns the car cannot make (their arcs dropped one
     route at a time: the landmark bounds hold on a graph with fewer arcs) and without
     edges whose bends it cannot follow (blocked likewise, but the origin and
     destination), with the edges of tight bends it keeps; or ``path``, its tight turns
     and its edges of tight bends where none avoids them (within
-    :data:`MAX_TIGHT_DETOURS` tries). Turnarounds are not tested, and a detour may not
-    add one."""
+    :data:`MAX_TIGHT_DETOURS` tries). With ``hard``, turns the car makes only on a
+    searched path (:func:`~splineplan.network.searched_path`: at its turning limit)
+    count as tight too. Turnarounds are not tested, and a detour may not add one."""
     ids = network.edge_ids
 
     def bends_of(p: list[int]) -> list[int]:
@@ -245,7 +267,9 @@ def _without_tight_turns(
     def tight_of(p: list[int]) -> list[tuple[int, int]]:
         # turnarounds are no forward turn at all: the planner knows them apart
         return [(u, v) for u, v in itertools.pairwise(p)
-                if not turn_fits(network, ids[u], ids[v], vclass, car)
+                if (not turn_fits(network, ids[u], ids[v], vclass, car)
+                    or (hard and searched_path(network, ids[u], ids[v], vclass, car)
+                    is not None))
                 and not is_turnaround(network, ids[u], ids[v], vclass)]
 
     def backs_of(p: list[int]) -> list[tuple[int, int]]:

@@ -20,9 +20,18 @@ from hypothesis import strategies as st
 from benchmarks.kinematic_oracle import Car, Search, drive
 from benchmarks.turns import TurnBuilder, outside, turns_of
 from splineplan.errors import ParameterError
-from splineplan.network import CarShape, RoadNetwork, bend_fits, load_network, turn_fits
+from splineplan.network import (
+    CarShape,
+    RoadNetwork,
+    bend_fits,
+    load_network,
+    route_corridor,
+    searched_path,
+    turn_fits,
+)
 from splineplan.pipeline import plan
 from splineplan.route import shortest_route
+from splineplan.turnpath import STEP
 
 #: How far [m] a footprint may reach beyond the paving (shapely's buffers of curved lanes,
 #: the curve's sampling every few decimetres).
@@ -93,27 +102,38 @@ def test_level_1_keeps_a_city_turn_a_driver_makes_turning_in_early() -> None:
     assert outside(turn, np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.heading)) <= TOL
 
 
-def _tight_network(tmp: Path) -> Path:
-    """A network where the shortest route from xa to cg turns left by 145 degrees from one
-    lane into another at a junction of nothing else (ab -> bc at b), and a longer route
-    goes round the block by am, mn, nk, kc with right-angled turns between two-lane roads."""
-    nodes = {"x": (-100, 0), "a": (0, 0), "b": (100, 0), "c": (30, 45), "g": (-60, 45),
-             "m": (0, -40), "n": (200, -40), "k": (200, 45)}
-    edges = [("xa", 2), ("ab", 1), ("bc", 1), ("cg", 2), ("am", 2), ("mn", 2), ("nk", 2),
-             ("kc", 2)]
+def _block_network(tmp: Path, name: str, c: tuple[float, float], lanes_in: int,
+                   connection: bool) -> Path:
+    """A network where the shortest route from xa to cg turns left at a junction of
+    nothing else (ab, of ``lanes_in`` lanes, at b (100, 0) into the one-lane bc towards
+    ``c``; ``connection``: from ab's first lane alone), and a longer route goes round the
+    block by am, mn, nk, kc with right-angled turns between two-lane roads."""
+    nodes = {"x": (-100, 0), "a": (0, 0), "b": (100, 0), "c": c, "g": (-60, c[1]),
+             "m": (0, -40), "n": (200, -40), "k": (200, c[1])}
+    edges = [("xa", 2), ("ab", lanes_in), ("bc", 1), ("cg", 2), ("am", 2), ("mn", 2),
+             ("nk", 2), ("kc", 2)]
     (tmp / "n.nod.xml").write_text(
         "<nodes>" + "".join(f'<node id="{k}" x="{x}" y="{y}"/>'
                             for k, (x, y) in nodes.items()) + "</nodes>")
     (tmp / "n.edg.xml").write_text(
         "<edges>" + "".join(f'<edge id="{e}" from="{e[0]}" to="{e[1]}" numLanes="{n}" '
                             'speed="13.89"/>' for e, n in edges) + "</edges>")
-    (tmp / "n.con.xml").write_text(
-        '<connections><connection from="ab" to="bc" fromLane="0" toLane="0"/></connections>')
-    out = tmp / "tight.net.xml"
+    extra: list[str] = []
+    if connection:
+        (tmp / "n.con.xml").write_text(
+            '<connections><connection from="ab" to="bc" fromLane="0" toLane="0"/>'
+            '</connections>')
+        extra = ["-x", str(tmp / "n.con.xml")]
+    out = tmp / f"{name}.net.xml"
     subprocess.run(["netconvert", "-n", str(tmp / "n.nod.xml"), "-e", str(tmp / "n.edg.xml"),
-                    "-x", str(tmp / "n.con.xml"), "--no-turnarounds", "-o", str(out)],
+                    *extra, "--no-turnarounds", "-o", str(out)],
                    check=True, capture_output=True)
     return out
+
+
+def _tight_network(tmp: Path) -> Path:
+    """ab turns left by 145 degrees from one lane into another at b."""
+    return _block_network(tmp, "tight", (30.0, 45.0), 1, connection=True)
 
 
 @pytest.fixture(scope="module")
@@ -174,6 +194,45 @@ def test_a_lane_kinked_just_before_its_junction_is_a_turn_too_tight(tmp_path: Pa
     assert not turn_fits(net, "ab", "bc", "passenger", CarShape())
     route = shortest_route(net, "ab", "bc", car=CarShape())
     assert route.tight_turns == (("ab", "bc"),)
+
+
+def _limit_network(tmp: Path) -> Path:
+    """The tight network's shape with a wider way in: ab has two lanes, and turns by 140
+    degrees into bc."""
+    turn = np.radians(140.0)
+    c = (100.0 + 80.0 * float(np.cos(turn)), 80.0 * float(np.sin(turn)))
+    return _block_network(tmp, "limit", c, 2, connection=False)
+
+
+def test_a_turn_made_only_at_the_turning_limit_is_found_and_planned(tmp_path: Path) -> None:
+    """ab -> bc: no Dubins path of level 1's test keeps to the paving, but the oracle
+    drives the turn, swinging wide into the junction at full lock. Level 1's search finds
+    a path too (:func:`searched_path`; before it, level 1 refused the turn and routed
+    round the block): its footprints stay on the turn's paving (shapely) and its heading
+    turns within the limit. Routes take the turn, or go round it where asked to avoid
+    turns at the limit; the corridor along the path holds it; the plans through the turn
+    are feasible and on the paving."""
+    out = _limit_network(tmp_path)
+    net, car = load_network(out), CarShape()
+    turn = TurnBuilder(out).turn("ab", "bc")
+    assert drive(turn.window, [], turn.start, turn.goal, margin=0.0, search=SEARCH).found
+    path = searched_path(net, "ab", "bc", "passenger", car)
+    assert path is not None and turn_fits(net, "ab", "bc", "passenger", car)
+    assert outside(turn, path[:, 0], path[:, 1], path[:, 2]) <= TOL
+    assert np.abs(np.diff(path[:, 2])).max() <= STEP / car.min_turn_radius + 1e-9
+    assert shortest_route(net, "xa", "cg", car=car).edges == ("xa", "ab", "bc", "cg")
+    assert shortest_route(net, "xa", "cg", car=car, avoid_limit_turns=True).edges == (
+        "xa", "am", "mn", "nk", "kc", "cg")
+    corridor = route_corridor(net, shortest_route(net, "ab", "bc", car=car), car=car)
+    sl = corridor.to_sl(path[:, :2])
+    assert np.all(sl[:, 1] <= np.interp(sl[:, 0], corridor.s, corridor.left) + 1e-6)
+    assert np.all(sl[:, 1] >= np.interp(sl[:, 0], corridor.s, corridor.right) - 1e-6)
+    p = plan(net, "ab", "bc", start_pos=turn.start_pos, start_xy=turn.start[:2],
+             start_heading=turn.start[2])
+    tr = p.trajectory
+    assert p.route.edges == ("ab", "bc") and tr.feasible
+    assert outside(turn, np.asarray(tr.x), np.asarray(tr.y), np.asarray(tr.heading)) <= TOL
+    assert plan(net, "xa", "cg").trajectory.feasible
 
 
 def test_level_1_keeps_every_turn_of_the_grid() -> None:

@@ -168,7 +168,8 @@ class Driver(Replanning, Control):
                                 f"the ego's length ({ego.length} m): the position is the front "
                                 "bumper's")
         route = forward_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
-                              start_pos=ego.start_pos, car=self.car)
+                              start_pos=ego.start_pos, car=self.car,
+                              avoid_limit_turns=True)
         goal_len = self.net.length_of(ego.goal_edge)
         if ego.goal_pos is not None and ego.goal_pos > goal_len:
             raise ScenarioError(f"{sc.name}: ego.goal_pos {ego.goal_pos} m is beyond the end of "
@@ -183,7 +184,8 @@ class Driver(Replanning, Control):
 
         ego = self.sc.ego
         route = forward_route(self.net, ego.start_edge, ego.goal_edge, vclass=ego.vclass,
-                              start_pos=ego.start_pos, car=self.car)
+                              start_pos=ego.start_pos, car=self.car,
+                              avoid_limit_turns=True)
         self._set_route(route_corridor(self.net, route, vclass=ego.vclass), route.edges)
         self.route_length = route.length
 

@@ -750,7 +750,8 @@ class Replanning(Perception):
         pos = min(max(self.station - start + ego.length / 2.0, 0.0), self.net.length_of(here))
         try:
             route = forward_route(self.net, here, ego.goal_edge, vclass=ego.vclass,
-                                  avoid=self.avoid, start_pos=pos, car=self.car)
+                                  avoid=self.avoid, start_pos=pos, car=self.car,
+                                  avoid_limit_turns=True)
             corridor = route_corridor(self.net, route, vclass=ego.vclass)
         except (NoRouteError, GeometryError) as e:
             return False, RoadBlockedError(f"{err}; no other route: {e}", station=err.station,
