@@ -117,7 +117,7 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
     "splineplan.lattice": (1.0, {
         "_search": ((F2, F3, I2, I2, F2, i8, f8, I1),),
     }),
-    "splineplan.turnpath": (4.8, {
+    "splineplan.turnpath": (3.0, {
         "_fill": ((F1, F1, I1, f8, f8, i8, i8, f8),),
         "_search": ((F2, f8, f8, F2, F2, F1, F1, f8, f8, i8),),
     }),

@@ -113,10 +113,16 @@ def _fill(xs: FloatArray, ys: FloatArray, offsets: NDArray[np.int64], x0: float,
                 if (ya <= yc < yb) or (yb <= yc < ya):
                     xc[m] = xa + (yc - ya) * (xb - xa) / (yb - ya)
                     m += 1
-            xs_sorted = np.sort(xc[:m])
+            for q in range(1, m):  # insertion sort: a few crossings a row
+                v = xc[q]
+                r = q - 1
+                while r >= 0 and xc[r] > v:
+                    xc[r + 1] = xc[r]
+                    r -= 1
+                xc[r + 1] = v
             for q in range(0, m - 1, 2):
-                i0 = max(math.ceil((xs_sorted[q] - x0) / cell - 0.5), 0)
-                i1 = min(math.floor((xs_sorted[q + 1] - x0) / cell - 0.5), nx - 1)
+                i0 = max(math.ceil((xc[q] - x0) / cell - 0.5), 0)
+                i1 = min(math.floor((xc[q + 1] - x0) / cell - 0.5), nx - 1)
                 for i in range(i0, i1 + 1):
                     mask[j, i] = True
     return mask
