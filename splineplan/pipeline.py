@@ -7,7 +7,11 @@ closed edge is avoided and level 1 plans again, as the paper's conclusion propos
 Tight turns. Level 1 gets the vehicle's footprint and turning radius
 (:class:`~splineplan.network.CarShape`, from the roadmap and trajectory parameters) and
 routes round junction turns that this car cannot make within SUMO's paving, where another
-route exists (:func:`splineplan.route.shortest_route`).
+route exists (:func:`splineplan.route.shortest_route`). A turn it makes only on a path
+that level 1 searched for, at its turning limit (:func:`splineplan.network.searched_path`),
+is taken; where the plan then breaks a limit, the plan along that path
+(``route_corridor(..., car=...)``) and the plan along a route without such turns are
+tried too, and the best of them kept.
 
 Turnarounds. Level 1 is length-optimal and may turn back onto the reverse edge (at a dead
 end, or where a U-turn is shorter than going round a block). A corridor cannot fold back
