@@ -1502,7 +1502,7 @@ def turn_fits(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
     (:func:`turn_path`) looks for one that swings wide or changes its radius, as a driver
     does at the turning limit; the turn fits where it finds one (:func:`searched_path`
     then names it). On 200 random Monaco turns the two agree with the kinematic oracle on
-    193 (the Dubins paths alone on 180; see ``benchmarks/RESULTS.md``).
+    191 (the Dubins paths alone on 180; see ``benchmarks/RESULTS.md``).
     """
     key = ("fits", from_edge, to_edge, vclass, repr(car))
     if key not in network._bands:

@@ -204,7 +204,7 @@ def plan(
             best = along(route, corridor_of(route))
             if not best[2].trajectory.feasible and _searched(network, route, car):
                 # a turn the car makes only at its turning limit: along the path level 1
-                # found for it, then by a route without such turns; the better plan
+                # found for it, then by a route without such turns; the best plan
                 for how in ("path", "route"):
                     try:
                         if how == "path":
