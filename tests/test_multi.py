@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from shapely.geometry import LineString, Polygon
 
 from splineplan import cli
-from splineplan.closedloop.control import Control
+from splineplan.closedloop.control import SIDE_CLEAR, Control
 from splineplan.errors import ParameterError, ScenarioError
 from splineplan.scenario import load_scenario, sumo_scenario
 from splineplan.sim import simulate
@@ -532,26 +532,44 @@ def test_a_car_giving_way_inside_a_junction_goes_once_the_foe_waits_for_it(
     assert arrived == {"p", "q"}
 
 
-def test_a_car_waiting_to_change_lanes_waits_before_the_junction(tmp_path: Path) -> None:
-    """A planned car ('p') goes straight on from the two-lane D1E1 onto the one-lane
-    bridge, and its footprint reaches over the line into the left lane as it comes to
-    the junction, where SUMO's car 'q' crawls. It waits for the gap before the junction,
-    on its own lane, not inside the junction (where it stood in the way of the crossing
-    traffic, waiting for a gap that the junction's lanes do not need)."""
-    routes = """<routes>
+def _bridge_beside(tmp_path: Path, crawl: float) -> Any:
+    """D1E1 onto the one-lane bridge: the planned car 'p' goes straight on, its footprint
+    reaching over the line into the left lane as it comes to the junction, where SUMO's
+    car 'q' creeps at ``crawl`` [m/s] towards its left turn. The run's result."""
+    routes = f"""<routes>
 <vType id="car" length="4.5" width="1.8" vClass="passenger"/>
-<vType id="crawl" length="4.5" width="1.8" vClass="passenger" maxSpeed="0.05"/>
+<vType id="crawl" length="4.5" width="1.8" vClass="passenger" maxSpeed="{crawl:g}"/>
 <vehicle id="q" depart="0" departLane="1" departPos="98" departSpeed="0" type="crawl">
   <route edges="D1E1 E1E2"/></vehicle>
 <vehicle id="p" depart="0" departLane="0" departPos="30" departSpeed="max" type="car">
   <route edges="D1E1 bridge_east F1G1"/></vehicle>
 </routes>"""
-    _, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 30.0)
+    return _p_among_sumo(tmp_path, "city.net.xml", routes, 30.0)[1]
+
+
+def test_a_car_waiting_to_change_lanes_waits_before_the_junction(tmp_path: Path) -> None:
+    """'q' crawls at 0.3 m/s: the planned car waits for the gap before the junction, on
+    its own lane, not inside the junction (where it stood in the way of the crossing
+    traffic, waiting for a gap that the junction's lanes do not need)."""
+    r = _bridge_beside(tmp_path, 0.3)
     assert r.metrics["pairs"]["collision_pairs_planned"] == []
     d = r.vehicles["p"].driven
     lanes = [str(lane) for lane in d["lane"]]
     stands = [lane for lane, v in zip(lanes, d["speed"], strict=True) if float(v) < 0.1]
     assert stands and all(lane == "D1E1_0" for lane in stands), set(stands)
+
+
+def test_a_car_standing_beside_a_footprint_over_the_line_is_passed(tmp_path: Path) -> None:
+    """'q' stands (0.05 m/s): no gap along the lane is needed where the footprint passes
+    it, over the line, with room to spare (``control.SIDE_CLEAR``). The planned car goes
+    on without stopping and keeps clear of it (it stood there for good before, waiting
+    for a gap that a standing queue never gives)."""
+    r = _bridge_beside(tmp_path, 0.05)
+    assert r.metrics["pairs"]["collision_pairs_planned"] == []
+    assert r.metrics["pairs"]["min_gap_planned"]["value"] >= SIDE_CLEAR - 0.05
+    p = r.vehicles["p"]
+    assert p.status == "arrived"
+    assert min(float(v) for v in p.driven["speed"]) >= 1.0
 
 
 @given(st.floats(0.0, 30.0), st.floats(0.0, 30.0), st.sampled_from(["a", "b"]),

@@ -23,6 +23,7 @@ from splineplan.closedloop.bodies import (
     meetings,
 )
 from splineplan.closedloop.cooperate import CROSSING
+from splineplan.closedloop.lanes import LaneChange
 from splineplan.closedloop.perception import Perception, _interp, _locate
 from splineplan.errors import SplineplanError
 from splineplan.geometry import FloatArray, wrap_angle
@@ -53,6 +54,12 @@ STOPPED_FOE_SPEED = 0.1
 CHANGE_GAP_TIME = 1.0
 CHANGE_MIN_GAP = 1.0
 CHANGE_LOOK = 60.0
+#: Speed [m/s] below which a vehicle in the lane a plan reaches into stands: the gap
+#: test then asks whether the footprint passes it (:data:`SIDE_CLEAR`) over the change
+#: and :data:`SIDE_LOOK` beyond its start, not for a time gap.
+STANDING = 0.1
+SIDE_CLEAR = 0.15
+SIDE_LOOK = 10.0
 #: At a stop sign or an all-way stop the vehicle comes to a full stop with its front
 #: :data:`STOP_LINE` [m] before the line (at most :data:`STOP_REACH` more) and stands this
 #: long [s] (SUMO's ``jmStopSignWait`` at stop signs) before it goes, giving way as SUMO's
@@ -673,6 +680,8 @@ class Control(Perception):
         s_e = self.station + ahead
         for j, (s_o, _) in zip(near[there].tolist(), sl[there].tolist(), strict=True):
             v_o = max(float(o.speed[j]), 0.0)
+            if v_o < STANDING and self._clears_standing(j, ch):
+                continue  # it stands beside: the footprint passes it, wherever it reaches
             d = s_o + v_o * t_e - s_e
             half = 0.5 * (float(o.length[j]) + ego.length)
             if d >= 0.0:  # ahead of the ego then
@@ -688,6 +697,23 @@ class Control(Perception):
                                                             + ego.length / 2.0))
                 return stop  # one that reaches over the line already stands
         return math.inf
+
+    def _clears_standing(self, j: int, ch: LaneChange) -> bool:
+        """Whether the plan's footprint, from the vehicle to the end of the lane change
+        ``ch`` (at most :data:`SIDE_LOOK` past its start), keeps :data:`SIDE_CLEAR` from
+        vehicle ``j`` of ``others`` where it stands."""
+        ps = np.asarray(self.path_s, dtype=float)
+        stop = min(ch.end, ch.at + SIDE_LOOK)
+        k = np.flatnonzero((ps >= self.u) & (ps <= stop))
+        if not len(k):
+            return False
+        o, ego = self.others, self.sc.ego
+        gap = box_gap(np.asarray(self.path_xy, dtype=float)[k],
+                      np.asarray(self.path_heading, dtype=float)[k], (ego.length, ego.width),
+                      np.repeat(o.centre[j:j + 1], len(k), axis=0),
+                      np.full(len(k), float(o.head[j])),
+                      (float(o.length[j]), float(o.width[j])))
+        return bool(np.min(gap) >= SIDE_CLEAR)
 
     def _body_of(self, place: LanePlace, length: float
                  ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
