@@ -600,9 +600,10 @@ def route_corridor(network: RoadNetwork, route: Any, *, vclass: str | None = Non
         if i + 1 < len(edges):
             if not conns:
                 continue  # no internal lanes: the stretches are joined straight
-            path = searched_path(network, eid, edges[i + 1], cls, car) if car else None
-            if path is not None:
-                half = car.width / 2.0 + PATH_ROOM  # type: ignore[union-attr]
+            path = (searched_path(network, eid, edges[i + 1], cls, car)
+                    if car is not None else None)
+            if path is not None and car is not None:
+                half = car.width / 2.0 + PATH_ROOM
                 pieces.append((path[:, :2], np.full(len(path), half),
                                np.full(len(path), -half)))
                 continue
@@ -1551,7 +1552,9 @@ def _turn_fits(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,
             batch = []
     if batch and _any_path_paved(batch, paving, car):
         return True
-    return turn_path(network, from_edge, to_edge, vclass, car) is not None
+    found = turn_path(network, from_edge, to_edge, vclass, car) is not None
+    network._bands[("limit", from_edge, to_edge, vclass, repr(car))] = found
+    return found
 
 
 #: Where the search of :func:`turn_path` starts on an incoming lane, before its end, and
@@ -1569,11 +1572,10 @@ def searched_path(network: RoadNetwork, from_edge: str, to_edge: str, vclass: st
                   car: CarShape) -> FloatArray | None:
     """The path of :func:`turn_path` where the car makes the turn only on it (it fits by
     no simpler test of :func:`turn_fits`), else ``None``."""
-    if not turn_fits(network, from_edge, to_edge, vclass, car):
+    if not (turn_fits(network, from_edge, to_edge, vclass, car)
+            and network._bands.get(("limit", from_edge, to_edge, vclass, repr(car)))):
         return None
-    path: FloatArray | None = network._bands.get(("path", from_edge, to_edge, vclass,
-                                                  repr(car)))
-    return path
+    return turn_path(network, from_edge, to_edge, vclass, car)
 
 
 def turn_path(network: RoadNetwork, from_edge: str, to_edge: str, vclass: str,

@@ -530,11 +530,10 @@ def plot_turn(
         ring = np.vstack((shape, shape[:1]))
         ax.plot(ring[:, 0], ring[:, 1], color="#333333", lw=1.4, zorder=2, gid="junction",
                 label=f"junction {jid} (SUMO's outline)")
-    found = [p for a, b in itertools.pairwise(edges) if network.to_node(a) == jid
-             for p in [searched_path(network, a, b, plan.route.vclass, car or CarShape())]
-             if p is not None]
-    for p in found[:1]:
-        ax.plot(p[:, 0], p[:, 1], color="#6a1b9a", lw=1.2, ls=(0, (4, 2)), zorder=5,
+    found = next((searched_path(network, a, b, plan.route.vclass, car or CarShape())
+                  for a, b in itertools.pairwise(edges) if network.to_node(a) == jid), None)
+    if found is not None:
+        ax.plot(found[:, 0], found[:, 1], color="#6a1b9a", lw=1.2, ls=(0, (4, 2)), zorder=5,
                 gid="searched_path",
                 label="path level 1 searched for the car (at its turning limit)")
     for i, rm in enumerate(plan.roadmaps):

@@ -178,7 +178,7 @@ def shortest_route(
         # with avoid_limit_turns, turns the car makes only at its turning limit are
         # avoided too where a route does; where none does, only those it cannot make
         found = _without_tight_turns(network, vclass, car, adjacency, path, blocked,
-                                     potential, hard=avoid_limit_turns)
+                                     potential, avoid_limit_turns=avoid_limit_turns)
         if found[1] and avoid_limit_turns:
             found = _without_tight_turns(network, vclass, car, adjacency, path, blocked,
                                          potential)
@@ -249,14 +249,14 @@ MAX_TIGHT_DETOURS = 16
 def _without_tight_turns(
     network: RoadNetwork, vclass: str, car: CarShape,
     adjacency: list[list[tuple[int, float]]], path: list[int], blocked: set[int],
-    potential: list[float], *, hard: bool = False,
+    potential: list[float], *, avoid_limit_turns: bool = False,
 ) -> tuple[list[int], list[tuple[int, int]], list[int]]:
     """The least-cost path without turns the car cannot make (their arcs dropped one
     route at a time: the landmark bounds hold on a graph with fewer arcs) and without
     edges whose bends it cannot follow (blocked likewise, but the origin and
     destination), with the edges of tight bends it keeps; or ``path``, its tight turns
     and its edges of tight bends where none avoids them (within
-    :data:`MAX_TIGHT_DETOURS` tries). With ``hard``, turns the car makes only on a
+    :data:`MAX_TIGHT_DETOURS` tries). With ``avoid_limit_turns``, turns the car makes only on a
     searched path (:func:`~splineplan.network.searched_path`: at its turning limit)
     count as tight too. Turnarounds are not tested, and a detour may not add one."""
     ids = network.edge_ids
@@ -268,7 +268,8 @@ def _without_tight_turns(
         # turnarounds are no forward turn at all: the planner knows them apart
         return [(u, v) for u, v in itertools.pairwise(p)
                 if (not turn_fits(network, ids[u], ids[v], vclass, car)
-                    or (hard and searched_path(network, ids[u], ids[v], vclass, car)
+                    or (avoid_limit_turns
+                        and searched_path(network, ids[u], ids[v], vclass, car)
                     is not None))
                 and not is_turnaround(network, ids[u], ids[v], vclass)]
 

@@ -46,7 +46,9 @@ YIELD_EDGE = 0.2
 #: A vehicle in the path slower than this [m/s] stands in a queue: the ego keeps a junction
 #: clear rather than stand inside it behind that vehicle (``keep_clear``).
 QUEUE_SPEED = 1.0
-#: A vehicle slower than this [m/s] outside a conflict area is waiting there, not coming.
+#: A vehicle slower than this [m/s] stands: outside a conflict area it is waiting there,
+#: not coming; in the lane a plan reaches into, the gap test asks whether the footprint
+#: passes it (:data:`SIDE_CLEAR`), not for a time gap.
 STOPPED_FOE_SPEED = 0.1
 #: A lane change waits for a gap of this time [s] at the speed of the one behind (the
 #: ego's ahead), at least :data:`CHANGE_MIN_GAP` [m], to the vehicles within
@@ -54,10 +56,9 @@ STOPPED_FOE_SPEED = 0.1
 CHANGE_GAP_TIME = 1.0
 CHANGE_MIN_GAP = 1.0
 CHANGE_LOOK = 60.0
-#: Speed [m/s] below which a vehicle in the lane a plan reaches into stands: the gap
-#: test then asks whether the footprint passes it (:data:`SIDE_CLEAR`) over the change
-#: and :data:`SIDE_LOOK` beyond its start, not for a time gap.
-STANDING = 0.1
+#: Room [m] the footprint keeps from a vehicle standing in the lane a plan reaches into,
+#: over the lane change and at most :data:`SIDE_LOOK` [m] past its start, for the change
+#: to need no gap (:meth:`Control._clears_standing`).
 SIDE_CLEAR = 0.15
 SIDE_LOOK = 10.0
 #: At a stop sign or an all-way stop the vehicle comes to a full stop with its front
@@ -680,7 +681,7 @@ class Control(Perception):
         s_e = self.station + ahead
         for j, (s_o, _) in zip(near[there].tolist(), sl[there].tolist(), strict=True):
             v_o = max(float(o.speed[j]), 0.0)
-            if v_o < STANDING and self._clears_standing(j, ch):
+            if v_o < STOPPED_FOE_SPEED and self._clears_standing(j, ch):
                 continue  # it stands beside: the footprint passes it, wherever it reaches
             d = s_o + v_o * t_e - s_e
             half = 0.5 * (float(o.length[j]) + ego.length)
