@@ -460,8 +460,8 @@ def route_corridor(network: Any, route: LaneletRoute, obstacles: Obstacles, *,
     keeps to the route's own lanelets in each section (both lanes of a lane change; the
     corridor's keep offsets): level 2 plans among static obstacles only, and its widest
     path would otherwise take the middle of a multi-lane road, across the lane of the
-    traffic beside; where those lanes are blocked, level 2 uses the whole road.
-    """
+    traffic beside; around where those lanes are blocked, level 2 uses the whole road
+    (:func:`splineplan.roadmap.plan_roadmap`)."""
     on_route = set(route.lanelets)
     sections = [_group(network, lid) for lid in route.chain]
     # the reference lane of each section: the previous reference's successor where it is in

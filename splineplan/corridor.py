@@ -69,7 +69,8 @@ class Corridor:
     keep_left, keep_right
         Lateral offsets ``(n,)`` [m] between which the vehicle's centre keeps (the lanes
         that lead on along the route, before a junction), :data:`UNBOUNDED` where the
-        whole road will do; ``None``: nowhere bounded. The footprint keeps to ``left``
+        whole road will do; ``None``: nowhere bounded. Level 2 releases them around
+        where they leave no passage. The footprint keeps to ``left``
         and ``right``.
     edge_ends
         Station ``(len(edges),)`` [m] at which each edge's own stretch ends: from there to

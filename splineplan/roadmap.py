@@ -249,7 +249,10 @@ def plan_roadmap(
     straight segment along the reference line's normal between the road boundaries. Its
     free intervals are the points at least ``params.inflation`` [m] from every obstacle and
     ``params.road_inflation`` [m] from both road edges (lateral offset within
-    ``[right + road_inflation, left - road_inflation]``).
+    ``[right + road_inflation, left - road_inflation]``), and, where the corridor has keep
+    offsets (the lanes a vehicle keeps to), within those beyond :data:`KEEP_GRACE` of the
+    start; where they leave no passage, only around the stretch they block
+    (:data:`RELEASE_AFTER`).
     A vertex stands at each interval's midpoint. An arc joins vertices ``a`` and ``b`` of
     consecutive lines when the vehicle (a point in the grown configuration space) can pass
     from ``a`` to ``b``: along ``a``'s line inside its free interval, across a straight
@@ -306,16 +309,34 @@ def plan_roadmap(
         raise GeometryError(f"start_xy must be two finite coordinates, got {start_xy!r}")
     s0, l0 = (float(v) for v in corridor.to_sl(start[None])[0])
     _check_start(corridor, s0, l0)
-    try:
-        out = _plan(corridor, obstacles, start, s0, l0, params, s0 + KEEP_GRACE)
-    except RoadBlockedError:
-        if corridor.keep_left is None:
-            raise
-        # the lanes that lead on are blocked before the junction: the whole road will do
-        logger.debug("roadmap: no passage within the lanes that lead on; using any lane")
-        out = _plan(corridor, obstacles, start, s0, l0, params, math.inf)
+    out = _plan_keeping(corridor, obstacles, start, s0, l0, params)
     _warn_start_inside(obstacles, start, out)
     return out
+
+
+def _plan_keeping(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float,
+                  l0: float, params: RoadmapParams) -> Roadmap:
+    """:func:`_plan` within the corridor's keep offsets, released around each stretch
+    where they leave no passage (:data:`RELEASE_AFTER` beyond the first line that no path
+    reached, tapered before and after: :func:`_sweep_lines`), one stretch at a time; where
+    a released stretch is still blocked, or after :data:`RELEASE_TRIES` stretches, the keep
+    offsets do not bind at all."""
+    released: list[tuple[float, float]] = []
+    while corridor.keep_left is not None and len(released) < RELEASE_TRIES:
+        try:
+            return _plan(corridor, obstacles, start, s0, l0, params, s0 + KEEP_GRACE,
+                         tuple(released))
+        except RoadBlockedError as err:
+            at = err.station - corridor.offset
+            if any(a - 1e-6 <= at <= b + 1e-6 for a, b in released):
+                break  # blocked where the keep offsets were released
+            released.append((at, at + RELEASE_AFTER))
+            logger.debug("roadmap: no passage within the lanes at s=%.1f m; other lanes "
+                         "there", at)
+    if corridor.keep_left is not None:
+        # the lanes that lead on are blocked before the junction: the whole road will do
+        logger.debug("roadmap: no passage within the lanes that lead on; using any lane")
+    return _plan(corridor, obstacles, start, s0, l0, params, math.inf)
 
 
 def _warn_start_inside(obstacles: Obstacles, start: FloatArray, roadmap: Roadmap) -> None:
@@ -336,13 +357,16 @@ def _warn_start_inside(obstacles: Obstacles, start: FloatArray, roadmap: Roadmap
 
 
 def _plan(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s0: float, l0: float,
-          params: RoadmapParams, keep_from: float) -> Roadmap:
-    """:func:`plan_roadmap` with the corridor's keep offsets bound from ``keep_from`` [m]."""
+          params: RoadmapParams, keep_from: float,
+          released: tuple[tuple[float, float], ...] = ()) -> Roadmap:
+    """:func:`plan_roadmap` with the corridor's keep offsets bound from ``keep_from`` [m]
+    and released over the stretches ``released`` (:func:`_sweep_lines`)."""
     r = params.inflation
     stations = _stations(corridor.length, params.d)
     first = min(int(np.searchsorted(stations, s0 - 1e-9, side="left")), len(stations) - 1)
     stations = stations[first:]
-    lines = _sweep_lines(corridor, stations, params.road_inflation, keep_from=keep_from)
+    lines = _sweep_lines(corridor, stations, params.road_inflation, keep_from=keep_from,
+                         released=released)
     iv_line, iv_lo, iv_hi = _free_intervals(lines, obstacles, r)
     nline = len(stations)
     mid = (iv_lo + iv_hi) / 2.0
@@ -709,12 +733,24 @@ def _stations(length: float, d: float) -> FloatArray:
 #: Stretch [m] ahead of the start over which the corridor's keep offsets do not bind: a
 #: vehicle that starts in another lane needs room to change lanes.
 KEEP_GRACE = 10.0
+#: Where the keep offsets leave no passage (an obstacle on the route's lanes), they are
+#: released over this stretch [m] from the first line that no path reached, and widened
+#: each side by :data:`RELEASE_TAPER` metres per metre for :data:`RELEASE_REACH` metres
+#: before and after it: the widest path then moves to the passing lane gradually (at half
+#: the taper: a lane change over about 45 m) and back into its lane after the obstacle.
+RELEASE_AFTER = 10.0
+RELEASE_TAPER = 0.15
+RELEASE_REACH = 50.0
+#: Stretches released one after another before the keep offsets are dropped altogether.
+RELEASE_TRIES = 8
 
 
 def _sweep_lines(corridor: Corridor, stations: FloatArray, r: float, *,
-                 keep_from: float = 0.0) -> _Lines:
+                 keep_from: float = 0.0,
+                 released: tuple[tuple[float, float], ...] = ()) -> _Lines:
     """Sweep lines; the vehicle's centre keeps within the shrunk road and, from station
-    ``keep_from`` on and where they leave room, within the corridor's keep offsets."""
+    ``keep_from`` on and where they leave room, within the corridor's keep offsets, which
+    the stretches ``released`` (from, to [m]) widen (see :data:`RELEASE_AFTER`)."""
     h = corridor.heading_at(stations)
     tangent = np.column_stack((np.cos(h), np.sin(h)))
     normal = np.column_stack((-tangent[:, 1], tangent[:, 0]))
@@ -723,6 +759,10 @@ def _sweep_lines(corridor: Corridor, stations: FloatArray, r: float, *,
     lo, hi = right + r, left - r
     if corridor.keep_left is not None:
         k_lo, k_hi = corridor.keep_at(stations)
+        for a, b in released:
+            away = np.maximum(np.maximum(a - stations, stations - b), 0.0)
+            wider = RELEASE_TAPER * np.maximum(RELEASE_REACH - away, 0.0)
+            k_lo, k_hi = k_lo - wider, k_hi + wider
         k_lo, k_hi = np.maximum(lo, k_lo), np.minimum(hi, k_hi)
         use = (stations >= keep_from) & (k_lo <= k_hi)
         lo, hi = np.where(use, k_lo, lo), np.where(use, k_hi, hi)

@@ -24,7 +24,11 @@ Steps, and the choices beyond the paper:
    equation (3) has points to move on long straights.
 2. Lead-in: the first roadmap vertex used is the farthest that the vehicle's position
    reaches within the bands (within ``max_control_spacing``), and at least the lead-in
-   distance ahead. Where the road bends tighter than twice the turning radius (a
+   distance ahead. Where that curve makes the vehicle start slower than it drives (an
+   obstacle beside its lane just ahead: the curve keeps the start's heading for half the
+   lead-in and then bends sharply past it), the lead-in is shortened to two thirds and a
+   third of it in turn (:data:`SHORT_LEADS`), and the better curve kept
+   (:func:`_better`). Where the road bends tighter than twice the turning radius (a
    junction turn, a kinked lane), the first polygon is instead the one that spreads the
    turn over the bands (:func:`~splineplan.control_polygon.min_turning_offsets`: least
    bending, reweighted towards the least largest turn), from a heading point one sweep
@@ -374,8 +378,8 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     first, until one is."""
     made: list[tuple[Trajectory, Roadmap, dict[str, Any]]] = []
 
-    def attempt(rm: Roadmap, **how: Any) -> Trajectory:
-        tr = _plan_once(rm, corridor, obstacles, params, start_heading, start_speed,
+    def attempt(rm: Roadmap, tp: TrajectoryParams = params, **how: Any) -> Trajectory:
+        tr = _plan_once(rm, corridor, obstacles, tp, start_heading, start_speed,
                         end_speed, **how)
         made.append((tr, rm, how))
         return tr
@@ -403,6 +407,19 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
                       float(traj.speed[0]), other.feasible, float(other.speed[0]))
             if other.feasible and float(other.speed[0]) > float(traj.speed[0]):
                 traj = other
+    for share in SHORT_LEADS if polish and not smooth else ():
+        if not (traj.feasible and _slowed(traj, start_speed)):
+            break
+        # the lead-in holds the curve on the start's heading too long for what lies ahead
+        # (an obstacle beside the lane just ahead): the first polygon with a shorter one
+        # takes the offset over more of the way
+        short = replace(params, lead_in_time=share * params.lead_in_time,
+                        lead_in_lengths=share * params.lead_in_lengths)
+        other = attempt(roadmap, short, frame=frame)
+        log.debug("with %.2f of the lead-in the curve (feasible %s) starts at %.1f m/s",
+                  share, other.feasible, float(other.speed[0]))
+        if other.feasible and _better(other, traj, start_speed):
+            traj = other
     if (not traj.feasible and polish and params.detour_rate > 0
             and _steep(roadmap, params.detour_rate)):
         detour = detour_roadmap(roadmap, corridor, params.detour_rate)
@@ -480,6 +497,21 @@ def _slowed(tr: Trajectory, start_speed: float) -> bool:
 #: Shortfall [m/s] of a curve's first speed below the start speed at which
 #: :func:`_plan_polygons` tries the other control polygon too.
 SLOW_START = 0.5
+#: Shares of the lead-in's length with which :func:`_plan_polygons` tries the first
+#: polygon again, in turn, while the curve still starts slower than the vehicle drives
+#: (:func:`_slowed`).
+SHORT_LEADS = (2.0 / 3.0, 1.0 / 3.0)
+
+
+def _better(tr: Trajectory, than: Trajectory, start_speed: float) -> bool:
+    """Whether curve ``tr`` drives better than ``than`` from the start: it starts at the
+    vehicle's speed where the other does not, or as well and reaches the shorter one's
+    end sooner."""
+    ok, ok_than = not _slowed(tr, start_speed), not _slowed(than, start_speed)
+    if ok != ok_than:
+        return ok
+    end = min(float(tr.s[-1]), float(than.s[-1]))
+    return float(np.interp(end, tr.s, tr.t)) < float(np.interp(end, than.s, than.t))
 
 
 def _too_sharp(tr: Trajectory, params: TrajectoryParams) -> bool:

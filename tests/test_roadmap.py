@@ -21,8 +21,11 @@ from splineplan.corridor import Corridor
 from splineplan.errors import GeometryError, ParameterError, RoadBlockedError
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import (
+    KEEP_GRACE,
     PLACE_HOLD,
     PLACE_ROAD_RESERVE,
+    RELEASE_AFTER,
+    RELEASE_REACH,
     Roadmap,
     RoadmapParams,
     plan_roadmap,
@@ -217,6 +220,33 @@ def test_one_obstacle_is_passed_on_the_wider_side_in_the_lane_beside_it(side: fl
     held = (rm.s >= 38.0 - PLACE_HOLD) & (rm.s <= 40.0)
     assert np.all(side * rm.l[held] <= -1.1 - rm.params.enough_separation + 1e-9)
     assert_free(rm, obs, open_road(corridor), R_DEFAULT)
+
+
+@settings(max_examples=25, deadline=None)
+@given(at=st.floats(30.0, 150.0), length=st.floats(4.0, 30.0))
+def test_a_lane_kept_is_left_only_around_the_car_that_blocks_it(at: float, length: float
+                                                                ) -> None:
+    """Keep offsets hold the vehicle's centre in the right lane of a two-lane road (the
+    lane it keeps, or the one that leads on), and a parked vehicle blocks that lane: the
+    path passes it in the other lane, and keeps to its own lane farther from it than the
+    release reaches (not the whole road, whose middle is the lane line), beyond the
+    stretch after the start where the keep offsets do not bind."""
+    plain = straight(260.0, 3.2, -3.2)
+    half = RoadmapParams().vehicle_width / 2.0
+    corridor = Corridor(plain.reference, plain.s, plain.left, plain.right,
+                        keep_left=np.full(len(plain.s), -half),
+                        keep_right=np.full(len(plain.s), -3.2 + half))
+    obs = Obstacles.from_boxes([[at, -1.6]], [0.0], [length], [2.0])
+    rm = plan_roadmap(corridor, obs, (0.0, -1.6))
+    assert_consistent(rm)
+    assert_free(rm, obs, open_road(corridor), R_DEFAULT)
+    blocked = at - length / 2.0 - R_DEFAULT  # the first sweep line in the grown car
+    far = ((rm.s >= KEEP_GRACE) & (rm.s < blocked - RELEASE_REACH - 1.0)) | (
+        rm.s > at + length / 2.0 + RELEASE_AFTER + RELEASE_REACH + 1.0)
+    assert far.any()
+    assert np.all((rm.l[far] >= -3.2 + half - 1e-9) & (rm.l[far] <= -half + 1e-9))
+    beside = np.abs(rm.s - at) <= length / 2.0
+    assert np.all(rm.l[beside] > 0.0)
 
 
 def _gate_field() -> tuple[Corridor, Obstacles]:

@@ -17,10 +17,11 @@ from test_speed import wheel_angle
 from splineplan.corridor import Corridor
 from splineplan.errors import ParameterError, RoadBlockedError, TrajectoryError
 from splineplan.obstacles import Obstacles
-from splineplan.planner import elongate_for_roadmap
+from splineplan.planner import elongate_for_roadmap, plan_corridor
 from splineplan.roadmap import Roadmap, RoadmapParams, plan_roadmap
 from splineplan.speed import allowed_speed
 from splineplan.trajectory import (
+    SLOW_START,
     Trajectory,
     TrajectoryParams,
     curvature_discrete,
@@ -560,6 +561,27 @@ def test_start_heading_is_followed() -> None:
         tr = plan_trajectory(make_roadmap(sine_path(), road), road, Obstacles.empty(),
                              TrajectoryParams(max_iterations=0), h)
         assert tr.heading[0] == pytest.approx(h, abs=1e-9)
+
+
+@pytest.mark.parametrize(("ahead", "speed"), [(20.0, 13.0), (25.0, 20.0)])
+def test_a_car_parked_just_ahead_is_passed_without_crawling(ahead: float, speed: float
+                                                            ) -> None:
+    """A car parked in the vehicle's lane of a two-lane road 20-25 m ahead, the vehicle at
+    13-20 m/s: leaving the lane takes a lateral offset of about 2 m over 20 m, a curvature
+    of about 0.02 1/m, which allows some 18 m/s. The curve must not hold the start's
+    heading so long that its bend past the car is sharp (it crawled past at about 1 m/s):
+    it starts at the vehicle's speed and passes at at least half of it, clear by shapely."""
+    road = straight_road(200.0, 7.0)
+    obstacles = Obstacles.from_boxes(np.array([[ahead, -1.75]]), 0.0, 4.5, 1.8)
+    tp = TrajectoryParams(s_max=20.0)
+    plan = plan_corridor(road, obstacles, (0.0, -1.75), 0.0, params=tp, start_speed=speed,
+                         end_speed=None)
+    tr = plan.trajectory
+    assert tr.feasible
+    assert shapely_violations(tr, road, obstacles, plan.roadmaps[0].params) == (0, 0)
+    assert tr.speed[0] >= speed - SLOW_START
+    passing = tr.s <= ahead + 10.0
+    assert float(np.min(tr.speed[passing])) >= 0.5 * speed
 
 
 @settings(max_examples=40, deadline=None)
