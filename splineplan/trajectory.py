@@ -376,12 +376,12 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
     polygons, then the detour; where none is feasible, those curves again with their
     bends eased (:meth:`splineplan.optimiser._Optimiser.ease_bends`), least violating
     first, until one is."""
-    made: list[tuple[Trajectory, Roadmap, dict[str, Any]]] = []
+    made: list[tuple[Trajectory, Roadmap, TrajectoryParams, dict[str, Any]]] = []
 
     def attempt(rm: Roadmap, tp: TrajectoryParams = params, **how: Any) -> Trajectory:
         tr = _plan_once(rm, corridor, obstacles, tp, start_heading, start_speed,
                         end_speed, **how)
-        made.append((tr, rm, how))
+        made.append((tr, rm, tp, how))
         return tr
 
     smooth = _sharp_bend(roadmap, corridor, params)
@@ -432,11 +432,11 @@ def _plan_polygons(roadmap: Roadmap, corridor: Corridor, obstacles: Obstacles,
         return traj
     # the curves made again with their bends eased, least violating first, until one is
     # feasible
-    for tr, rm, how in sorted(made, key=lambda m: _violation(m[0], params)):
+    for tr, rm, tp, how in sorted(made, key=lambda m: _violation(m[0], params)):
         if _violation(tr, params)[0] > 0 or not _too_sharp(tr, params):
             continue  # the footprint too close, or a kink: easing does not mend them
         for target in BEND_TARGETS:
-            other = _plan_once(rm, corridor, obstacles, params, start_heading, start_speed,
+            other = _plan_once(rm, corridor, obstacles, tp, start_heading, start_speed,
                                end_speed, **how, ease=target)
             log.debug("no feasible curve; with its bends eased to %.3f of the limit: %s",
                       target, other.feasible)
