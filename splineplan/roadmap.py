@@ -334,8 +334,10 @@ def _plan_keeping(corridor: Corridor, obstacles: Obstacles, start: FloatArray, s
             logger.debug("roadmap: no passage within the lanes at s=%.1f m; other lanes "
                          "there", at)
     if corridor.keep_left is not None:
-        # the lanes that lead on are blocked before the junction: the whole road will do
-        logger.debug("roadmap: no passage within the lanes that lead on; using any lane")
+        # blocked even where the keep offsets were released (or too many stretches):
+        # the whole road will do
+        logger.debug("roadmap: no passage within the lanes, released or not; using any "
+                     "lane")
     return _plan(corridor, obstacles, start, s0, l0, params, math.inf)
 
 
