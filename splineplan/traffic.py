@@ -4,7 +4,7 @@ Pure geometry and kinematics on plain floats and numpy arrays, no SUMO: whether 
 footprint is on a lane or junction area (:class:`RoadCheck`, built once from the
 :class:`~splineplan.network.RoadNetwork`, then on its own arrays), the vehicles around the
 ego as arrays (:class:`Others`), which of them is in the ego's path (:func:`probe_points`,
-:func:`next_in_circle`, :func:`first_in_reach`) and the speed that keeps a safe gap to it
+:func:`next_in_circle`, :func:`first_in_box_reach`) and the speed that keeps a safe gap to it
 (:func:`safe_speed`). They run many times per simulated second, hence the plain-float
 variants where a few points meet a few segments. Kept apart from :mod:`splineplan.sim`,
 which drives SUMO, so that they can be read and tested without a simulation.
@@ -290,24 +290,31 @@ def next_in_circle(xs: list[float], ys: list[float], i: int, cx: float, cy: floa
     return -1
 
 
-def first_in_reach(pts: list[tuple[float, float]], lo: int,
-                    circle: tuple[float, float, float, float],
-                    xs: list[float], ys: list[float], reach2: float) -> int:
+def first_in_box_reach(lo: int, circle: tuple[float, float, float, float],
+                       box: tuple[float, float, float, float], xs: list[float],
+                       ys: list[float], reach: float) -> int:
     """The first path sample index from ``lo`` on whose point (``xs``, ``ys``) [m] is within
-    ``sqrt(reach2)`` [m] of any of the points ``pts``; -1 if none is.
+    ``reach`` [m] of a rectangle, the body of a vehicle; -1 if none is.
 
-    ``circle``: centre x, y [m] and radius [m] of a circle that holds every point within
-    reach of ``pts``, and the largest distance [m] between consecutive samples; only the
-    samples in it are tried (:func:`next_in_circle`). Plain floats: a handful of points
-    against a handful of samples, stopping at the first hit, costs less than arrays."""
+    ``circle``: the rectangle's centre x, y [m], the radius [m] of a circle round it that
+    holds every point within reach of it (half its diagonal plus ``reach``), and the
+    largest distance [m] between consecutive samples; only the samples in it are tried
+    (:func:`next_in_circle`). ``box``: the heading's cosine and sine, half length and half
+    width [m]. The distance is to the whole outline, so that a path crossing a long
+    vehicle's side between its corners counts. Plain floats: a handful of samples,
+    stopping at the first hit, costs less than arrays."""
     cx, cy, r, step = circle
+    c, s, hl, hw = box
+    reach2 = reach * reach
     i = next_in_circle(xs, ys, lo, cx, cy, r, step)
     while i >= 0:
-        qx, qy = xs[i], ys[i]
-        for px, py in pts:
-            ex, ey = px - qx, py - qy
-            if ex * ex + ey * ey <= reach2:
-                return i
+        ex, ey = xs[i] - cx, ys[i] - cy
+        along = abs(ex * c + ey * s) - hl
+        side = abs(ey * c - ex * s) - hw
+        along = along if along > 0.0 else 0.0
+        side = side if side > 0.0 else 0.0
+        if along * along + side * side <= reach2:
+            return i
         i = next_in_circle(xs, ys, i + 1, cx, cy, r, step)
     return -1
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import NETS
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import Polygon
 
@@ -98,12 +98,14 @@ def test_path_samples_in_reach_are_in_the_bounding_circle(cx: float, cy: float, 
                                                           reach: float, seed: int) -> None:
     """The time-gap check looks only at the path samples within a vehicle's bounding circle
     plus the reach (a walk that jumps over samples the distance bound rules out); any
-    sample within reach of its probe points is among them, the walk finds the circle's
-    first sample (as a k-d tree query), and the first one in reach found with plain floats
-    is numpy's first."""
+    sample within reach of its footprint is among them, the walk finds the circle's
+    first sample (as a k-d tree query), and the first one in reach of the footprint found
+    with plain floats is shapely's first (a path crossing a long side between the
+    corners counts)."""
     from scipy.spatial import cKDTree
+    from shapely.geometry import Point, Polygon
 
-    from splineplan.traffic import first_in_reach, next_in_circle, probe_points
+    from splineplan.traffic import first_in_box_reach, next_in_circle
 
     rng = np.random.default_rng(seed)
     # a random walk near the vehicle: consecutive samples at most 0.5 m apart
@@ -111,9 +113,13 @@ def test_path_samples_in_reach_are_in_the_bounding_circle(cx: float, cy: float, 
     samples = np.array([cx, cy]) + rng.uniform(-12, 12, 2) + np.cumsum(steps, axis=0)
     xs, ys = samples[:, 0].tolist(), samples[:, 1].tolist()
     step = float(np.hypot(*np.diff(samples, axis=0).T).max()) * (1.0 + 1e-9)
-    pts = probe_points(cx, cy, math.cos(h), math.sin(h), length / 2.0, width / 2.0)
-    d2 = ((np.asarray(pts)[:, None, :] - samples[None]) ** 2).sum(axis=2)  # (9, m)
-    want = np.flatnonzero((d2 <= reach * reach).any(axis=0))
+    c, s = math.cos(h), math.sin(h)
+    body = Polygon([(cx + a * c - b * s, cy + a * s + b * c)
+                    for a, b in ((length / 2, width / 2), (-length / 2, width / 2),
+                                 (-length / 2, -width / 2), (length / 2, -width / 2))])
+    dist = np.array([body.distance(Point(p)) for p in samples])
+    assume(not np.any(np.abs(dist - reach) < 1e-9))  # none on the boundary's rounding
+    want = np.flatnonzero(dist <= reach)
     r = 0.5 * math.hypot(length, width) + reach
     ball = cKDTree(samples).query_ball_point([[cx, cy]], [r], return_sorted=True)[0]
     assert set(want.tolist()) <= set(ball)
@@ -122,7 +128,8 @@ def test_path_samples_in_reach_are_in_the_bounding_circle(cx: float, cy: float, 
     lo = next_in_circle(xs, ys, start, cx, cy, r, step)
     assert lo == (later_ball[0] if later_ball else -1)
     later = want[want >= start]
-    got = first_in_reach(pts, start, (cx, cy, r, step), xs, ys, reach * reach)
+    got = first_in_box_reach(start, (cx, cy, r, step), (c, s, length / 2.0, width / 2.0),
+                             xs, ys, reach)
     assert got == (int(later[0]) if len(later) else -1)
 
 

@@ -94,6 +94,7 @@ class DriverState:
     _obs_cache: dict[tuple[str, float, float], tuple[float, float, bool]]
     _body_paths: dict[tuple[str, str], Any]  # (lane, via) -> (bodies.BodyPath, lane) | None
     _bodies_now: dict[tuple[Any, float], Any]  # (LanePlace, length) -> predicted body | None
+    _bodies_after: dict[str, Any]  # id -> (bodies.BodyPath, lane index, lane id) after
     _pl: tuple[list[float], ...]
     _pl_np: tuple[FloatArray, FloatArray]
     _times_key: tuple[float, float] | None

@@ -29,7 +29,7 @@ from splineplan.errors import SplineplanError
 from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.spacetime import box_gap
 from splineplan.sumo.world import JunctionFoe, LanePlace, Signals
-from splineplan.traffic import first_in_reach, probe_points, safe_speed
+from splineplan.traffic import first_in_box_reach, safe_speed
 
 #: A planned vehicle within this distance [m] of where its published plan puts it keeps to
 #: its plan.
@@ -172,15 +172,14 @@ class Control(Perception):
     def _gap_speed(self) -> tuple[float, int]:
         """Speed cap [m/s] to keep the time gap to whatever is in the path, and red lights.
 
-        A vehicle is in the path where a corner, the centre or an edge's midpoint of its
-        footprint comes within the ego's half width plus :data:`PATH_MARGIN` of a path sample
-        ahead of the ego (the trajectory and its straight extension); the gap is to the first
-        such sample. Only the samples within the vehicle's bounding circle plus that reach
-        can be in reach: a vehicle whose circle misses the bounding box of the samples
-        ahead is skipped, and the first sample in each other one's circle is found for all
-        of them at once (:func:`~splineplan.kernels.first_in_circles`); the samples after
-        it, by
-        :func:`~splineplan.traffic.first_in_reach`.
+        A vehicle is in the path where its footprint comes within the ego's half width
+        plus :data:`PATH_MARGIN` of a path sample ahead of the ego (the trajectory and its
+        straight extension); the gap is to the first such sample. Only the samples within
+        the vehicle's bounding circle plus that reach can be in reach: a vehicle whose
+        circle misses the bounding box of the samples ahead is skipped, and the first
+        sample in each other one's circle is found for all of them at once
+        (:func:`~splineplan.kernels.first_in_circles`); the samples after it, by
+        :func:`~splineplan.traffic.first_in_box_reach`.
         """
         sc, ego, tp = self.sc, self.sc.ego, self.sc.trajectory
         sim = sc.sim
@@ -202,7 +201,6 @@ class Control(Perception):
                     cand.append((int(first[j]), j, float(o.cx[j]), float(o.cy[j]),
                                  float(orad[j])))
             cand.sort()
-            reach2 = reach * reach
             base = self.u + ego.length / 2.0 + sim.min_gap
             for lo, j, cx, cy, r in cand:
                 # the gap is at least up to the first sample in reach of the bounding
@@ -212,10 +210,10 @@ class Control(Perception):
                 if self.trusted and o.ids[j] in self.trusted and self._keeps_to_plan(
                         j, full_h[lo]):
                     continue  # crossing as it published: the plan yields to it
-                pts = probe_points(cx, cy, float(o.cos[j]), float(o.sin[j]),
-                                    0.5 * float(o.length[j]), 0.5 * float(o.width[j]))
-                first = first_in_reach(pts, lo, (cx, cy, r, self._sample_step),
-                                        full_x, full_y, reach2)
+                first = first_in_box_reach(
+                    lo, (cx, cy, r, self._sample_step),
+                    (float(o.cos[j]), float(o.sin[j]), 0.5 * float(o.length[j]),
+                     0.5 * float(o.width[j])), full_x, full_y, reach)
                 if first < 0:
                     continue
                 gap = full_s[first] - base
@@ -296,10 +294,11 @@ class Control(Perception):
         plan was timed among (:mod:`.cooperate`), crosses the path and is where that plan
         says (within :data:`ON_PLAN`): then the plan's timing keeps the margin from it,
         and the time gap, which would take a crossing vehicle for one standing in the
-        path, does not apply."""
+        path, does not apply. One slower than :data:`QUEUE_SPEED` is not trusted: its
+        control may hold it (giving way, in a queue) where its plan has it move on."""
         o = self.others
         turn = abs(math.remainder(float(o.head[j]) - path_heading, 2.0 * math.pi))
-        if turn <= CROSSING:
+        if turn <= CROSSING or float(o.speed[j]) < QUEUE_SPEED:
             return False
         xy, _, there = self.trusted[o.ids[j]].at([self.time])
         return bool(there[0]) and math.hypot(float(xy[0, 0]) - float(o.cx[j]),
@@ -533,17 +532,30 @@ class Control(Perception):
         if self.traj is None or cap <= 0.0:
             return math.inf
         out = math.inf
-        for s_in, s_out, t_in_b, t_out_b, why in self._bodies_meeting():
+        # where the other caps stand the vehicle if they brake it [m ahead]: there it
+        # waits, and a body that comes by later must find it before its sweep
+        b = self.sc.trajectory.b_max
+        stand = cap * cap / (2.0 * b) + self.v * self.dt if cap < self.v else math.inf
+        for s_in, s_out, t_in_b, t_out_b, why, touch in self._bodies_meeting():
+            if s_in <= self.u and touch is not None:
+                # within the margin of the sweep already: wait where the footprint is
+                # rather than drive on into the body, unless it overlaps it here
+                s_in, s_out, t_in_b, t_out_b = touch
             c = self._give_way(s_in, s_out, t_in_b, t_out_b)
+            if math.isinf(c) and s_in > self.u and stand >= s_in - self.u and t_out_b > 0.0:
+                c = self._stop_short(s_in - self.u)  # it would wait inside the sweep
             if c < min(out, cap):
                 out, self.why_slow = c, why
         return out
 
-    def _bodies_meeting(self) -> list[tuple[float, float, float, float, str]]:
+    def _bodies_meeting(self) -> list[tuple[float, float, float, float, str,
+                                            tuple[float, float, float, float] | None]]:
         """Where (first and last station on the plan [m]) and when (first and last time
         [s] from now) bodies meet the ego's footprint on its path ahead, and what to say
         of each (:meth:`_body_speed`): each moving long vehicle's, and the standing
-        vehicles' of each size together; all in one pass (:func:`~.bodies.meetings`)."""
+        vehicles' of each size together; all in one pass (:func:`~.bodies.meetings`).
+        For a moving long vehicle, also where and when its body overlaps the footprint
+        (no margin; ``None`` where it does not, and for the standing ones)."""
         o = self.others
         if not o.n:
             return []
@@ -557,6 +569,7 @@ class Control(Perception):
         rows: list[tuple[FloatArray, FloatArray, FloatArray, float, float, float]] = []
         whys: list[str] = []
         last: list[float] = []  # a body still meeting at this time stays
+        touching: list[bool] = []  # a row without the margin (follows its margin's row)
         where = {o.ids[i]: i for i in np.flatnonzero(o.length >= LONG_VEHICLE).tolist()}
         for place in self.signals.long:
             i = where.get(place.id)
@@ -567,10 +580,13 @@ class Control(Perception):
             if body is None:
                 continue
             times, centres, heads = body
-            rows.append((times, centres, heads, length, width, sc.roadmap.safety_margin))
-            whys.append(f"giving way to the body of vehicle '{place.id}' sweeping through "
-                        "the junction")
-            last.append(float(times[-1]))
+            why = (f"giving way to the body of vehicle '{place.id}' sweeping through the "
+                   "junction")
+            for margin in (sc.roadmap.safety_margin, 0.0):  # the margin, then touching
+                rows.append((times, centres, heads, length, width, margin))
+                whys.append(why)
+                last.append(float(times[-1]))
+                touching.append(margin == 0.0)
         # standing vehicles near the path ahead, by size (few sizes)
         xy = path[1]
         x0, y0 = xy.min(axis=0) - ego.length
@@ -585,6 +601,7 @@ class Control(Perception):
                          dims[1], margin))
             whys.append("keeping its body off a standing vehicle beside its path")
             last.append(0.0)
+            touching.append(False)
         if not rows:
             return []
         counts = [len(r[0]) for r in rows]
@@ -595,13 +612,17 @@ class Control(Perception):
                        np.repeat([r[3] for r in rows], counts),
                        np.repeat([r[4] for r in rows], counts),
                        np.repeat([r[5] for r in rows], counts), *path, (ego.length, ego.width))
-        found = []
-        for (s_in, s_out, t_in, t_out), why, end in zip(met.tolist(), whys, last, strict=True):
-            if math.isnan(s_in):
-                continue
+        spans: list[tuple[float, float, float, float] | None] = []
+        for (s_in, s_out, t_in, t_out), end in zip(met.tolist(), last, strict=True):
             if t_out >= end - 1e-9:
                 t_out = math.inf  # still there at the horizon
-            found.append((s_in, s_out, t_in, t_out, why))
+            spans.append(None if math.isnan(s_in) else (s_in, s_out, t_in, t_out))
+        found = []
+        for k, (span, why, touch) in enumerate(zip(spans, whys, touching, strict=True)):
+            if span is None or touch:
+                continue
+            bare = spans[k + 1] if k + 1 < len(spans) and touching[k + 1] else None
+            found.append((*span, why, bare))
         return found
 
     def _give_way(self, s_in: float, s_out: float, t_in_b: float, t_out_b: float) -> float:
@@ -702,7 +723,9 @@ class Control(Perception):
     def _clears_standing(self, j: int, ch: LaneChange) -> bool:
         """Whether the plan's footprint, from the vehicle to the end of the lane change
         ``ch`` (at most :data:`SIDE_LOOK` past its start), keeps :data:`SIDE_CLEAR` from
-        vehicle ``j`` of ``others`` where it stands."""
+        vehicle ``j`` of ``others`` where it stands, or where the two stand nearer already
+        (side by side, each waiting for the other's lane), never comes nearer to it than
+        it is."""
         ps = np.asarray(self.path_s, dtype=float)
         stop = min(ch.end, ch.at + SIDE_LOOK)
         k = np.flatnonzero((ps >= self.u) & (ps <= stop))
@@ -714,19 +737,29 @@ class Control(Perception):
                       np.repeat(o.centre[j:j + 1], len(k), axis=0),
                       np.full(len(k), float(o.head[j])),
                       (float(o.length[j]), float(o.width[j])))
-        return bool(np.min(gap) >= SIDE_CLEAR)
+        return bool(np.min(gap) >= min(SIDE_CLEAR, float(gap[0]) - 1e-3) and gap[0] > 0.0)
 
     def _body_of(self, place: LanePlace, length: float
                  ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
         """The predicted body (:func:`~.bodies.bodies_along`) of a moving long vehicle of
         ``length`` [m] at ``place``, ``None`` where it approaches no junction or does not
-        reach it within :data:`~.bodies.HORIZON`. Kept for the step (planned vehicles of
-        one run share it: the run clears it each step)."""
+        reach it within :data:`~.bodies.HORIZON`, and where its front has left the last
+        junction and its body has too. Kept for the step (planned vehicles of one run
+        share it: the run clears it each step)."""
         key = (place, length)
         if key in self._bodies_now:
             return self._bodies_now[key]
         found = None
         known = self._body_path(place)
+        after = self._bodies_after.get(place.id) if place.pos < length else None
+        if after is not None and after[2] == place.lane:
+            # its front has left the junction, its body still sweeps through it
+            known = after[:2]
+        elif known is not None and place.lane.startswith(":"):
+            c = self.net.connection_via(place.lane)
+            if c is not None:  # the lane after the junction, the last of the path
+                self._bodies_after[place.id] = (known[0], len(known[0].starts) - 1,
+                                                f"{c.to_edge}_{c.to_lane}")
         if known is not None:
             lanes, index = known
             at = lanes.station(index, place.pos)

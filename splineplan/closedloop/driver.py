@@ -101,6 +101,8 @@ class Driver(Replanning, Control):
         # (place, length) -> predicted body or None, this step's (see Control._body_of)
         self._bodies_now: dict[tuple[LanePlace, float],
                                tuple[FloatArray, FloatArray, FloatArray] | None] = {}
+        # long vehicle -> the path through its last junction, to the lane after it
+        self._bodies_after: dict[str, tuple[BodyPath, int, str]] = {}
         self.lateral = 0.0  # the ego's lateral offset [m] on the route
         self.station = 0.0
         self.deviation = 0.0

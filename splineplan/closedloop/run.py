@@ -207,10 +207,11 @@ class _Run:
         self.wall_time = 0.0
         self._roads: dict[str, RoadCheck] = {}
         self.board: dict[str, Published] = {}  # the planned vehicles' latest plans
-        # what the drivers share of long vehicles' bodies: paths through junctions, and
-        # this step's predicted bodies (Control._body_of)
+        # what the drivers share of long vehicles' bodies: paths through junctions, the
+        # last one each went through, and this step's predicted bodies (Control._body_of)
         self._body_paths: dict[Any, Any] = {}
         self._bodies_now: dict[Any, Any] = {}
+        self._bodies_after: dict[Any, Any] = {}
         self._entered = 0
         self._published = 0  # plans published so far
         self.sizes: dict[str, tuple[float, float]] = {}  # vehicle types' length, width
@@ -373,7 +374,8 @@ class _Run:
             long = (tuple(o.ids[i] for i in np.flatnonzero(o.length >= LONG_VEHICLE).tolist())
                     if o.n else ())
             mv = d.command(self.world.signals(d.ego, d.sc.sim.lookahead, near=YIELD_EDGE,
-                                              long=long))
+                                              long=long, planned=self.board,
+                                              lane=d.last_lane))
             try:
                 self.world.move(d.ego, mv.edge, mv.lane, mv.centre, mv.heading,
                                 d.sc.ego.length, mv.speed)
@@ -482,6 +484,7 @@ class _Run:
         d.priority = self._entered
         self._entered += 1
         d._body_paths, d._bodies_now = self._body_paths, self._bodies_now
+        d._bodies_after = self._bodies_after
         if self.multi:
             d.board = self.board
             d.publish = True

@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import math
 import time
+from collections.abc import Container
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +27,12 @@ from splineplan.traffic import NO_OTHERS, Others
 
 #: ``moveToXY`` keepRoute: bit 1 maps onto the vehicle's route only, bit 2 keeps the exact x, y.
 KEEP_ROUTE = 3
+#: SUMO's link states without a traffic light at which a vehicle gives way to others
+#: (minor, equal, stop sign): :meth:`World.signals` finds their foes itself too.
+YIELD_STATES = "m=s"
+#: How far [m] before such a link :meth:`World.signals` looks for those foes (the comfortable
+#: stop from the city's speeds, and a few seconds more).
+YIELD_LOOK = 50.0
 
 
 class SumoError(SimulationError):
@@ -156,6 +163,21 @@ class World:
         #: the places read this step (:meth:`places`)
         self._places_at = math.nan
         self._places: dict[str, LanePlace] = {}
+        #: per link (lane, lane it leads to): the incoming lanes with the right of way over
+        #: it and the junction lanes that cross it (:meth:`_unreported_foes`)
+        self._link_foes: dict[tuple[str, str], tuple[tuple[str, ...], frozenset[str]]] = {}
+        #: lane lengths [m], and the length of a junction's lanes from each internal lane
+        #: on [m]
+        self._lengths: dict[str, float] = {}
+        self._through: dict[str, float] = {}
+        #: per planned vehicle and lane: the link at the lane's end where it gives way
+        #: (the lane it leads to, its internal lane; empty where it need not)
+        self._next_link: dict[tuple[str, str], tuple[str, str]] = {}
+        #: the internal lane each vehicle on a lane takes next (:meth:`_via_of`)
+        self._next_via: dict[tuple[str, str], str] = {}
+        #: the vehicles on each lane asked for this step (:meth:`_unreported_foes`)
+        self._on_lanes_at = math.nan
+        self._on_lanes: dict[str, tuple[str, ...]] = {}
 
     # -- start and stop ------------------------------------------------------------------------
     def start(self, args: list[str], *, log_file: Path | None = None) -> None:
@@ -361,10 +383,14 @@ class World:
         return Others(ids, a, stopped_speed)
 
     def signals(self, vid: str, lookahead: float, *, near: float = 0.0,
-                long: tuple[str, ...] = ()) -> Signals:
+                long: tuple[str, ...] = (), planned: Container[str] = (),
+                lane: str = "") -> Signals:
         """Traffic lights and junction foes ahead of ``vid`` within ``lookahead`` [m]: the
-        foes it must yield to, farther than ``near`` [m] from their conflict area; and
-        where the vehicles ``long`` are on their lanes (:meth:`places`)."""
+        foes it must yield to, farther than ``near`` [m] from their conflict area (those
+        that ``getJunctionFoes`` leaves out found by :meth:`_unreported_foes`, except the
+        ``planned`` vehicles, whose published plans time the meeting); and where the
+        vehicles ``long`` are on their lanes (:meth:`places`). ``lane``: the lane SUMO
+        has ``vid`` on, where the caller knows it."""
         s = self.sumo
         t0 = time.perf_counter()
         try:
@@ -388,9 +414,101 @@ class World:
             assert foes is not None
             foes.append(JunctionFoe(f[0], f[1], f[2], f[3], f[4], bool(f[7]), v_f, size[0],
                                     str(f[6]), size[1]))
+        if foes is not None:
+            with contextlib.suppress(Exception):  # not on its route, or off the lanes
+                foes.extend(self._unreported_foes(vid, lane, lookahead, near,
+                                                  {f.id for f in foes}, planned))
         self.seconds += time.perf_counter() - t0
         return Signals(lights, None if foes is None else tuple(foes),
                        self.places(long) if long else ())
+
+    def _unreported_foes(self, vid: str, lane: str, lookahead: float, near: float,
+                         reported: set[str], planned: Container[str]) -> list[JunctionFoe]:
+        """Vehicles that ``vid`` must give way to at the link at the end of its lane (one
+        without a traffic light) and that ``getJunctionFoes`` leaves out: it misses the
+        foes of some links altogether (SUMO 1.28; on the bundled city network, every foe
+        of the links from ``D0C0`` at ``C0``), though SUMO's own drivers give way to them.
+        They are the vehicles on the incoming lanes with the right of way over the link
+        (``lane.getFoes``) whose next junction lane crosses it (``lane.getInternalFoes``).
+        The whole junction counts as their conflict area, as in SUMO's own junction model:
+        the distances are to the stop lines and on past the junction's lanes."""
+        veh, lanes = self.sumo.vehicle, self.sumo.lane
+        lane = lane or veh.getLaneID(vid)
+        if not lane or lane.startswith(":"):
+            return []
+        link = self._next_link.get((vid, lane))
+        if link is None:  # the link at the lane's end on the vehicle's route
+            links = veh.getNextLinks(vid)
+            link = self._next_link[(vid, lane)] = (
+                (links[0][0], links[0][4]) if links and not links[0][1]
+                and links[0][5] in YIELD_STATES and links[0][4] else ("", ""))
+        to_lane, via = link
+        if not via:
+            return []  # it has the way there, or a traffic light says
+        ego_in = self._length(lane) - float(veh.getLanePosition(vid))
+        if ego_in > min(lookahead, YIELD_LOOK) or ego_in <= near:
+            return []
+        known = self._link_foes.get((lane, to_lane))
+        if known is None:
+            known = self._link_foes[(lane, to_lane)] = (
+                tuple(dict.fromkeys(lanes.getFoes(lane, to_lane))),
+                frozenset(lanes.getInternalFoes(via)))
+        prior, crossing = known
+        ego_out = ego_in + self._through_length(via)
+        out = []
+        if self._on_lanes_at != self.time:
+            self._on_lanes_at, self._on_lanes = self.time, {}
+        for foe_lane in prior:
+            on = self._on_lanes.get(foe_lane)
+            if on is None:
+                on = self._on_lanes[foe_lane] = tuple(lanes.getLastStepVehicleIDs(foe_lane))
+            inside = foe_lane.startswith(":")  # waiting inside, to turn left
+            for v in on:
+                if v == vid or v in reported or v in planned:
+                    continue
+                foe_via = foe_lane if inside else self._via_of(v, foe_lane)
+                if foe_via not in crossing:
+                    continue  # turns away from the link
+                pos = float(veh.getLanePosition(v))
+                foe_in = -pos if inside else self._length(foe_lane) - pos
+                length, width = self._size(v)
+                out.append(JunctionFoe(v, ego_in, foe_in, ego_out,
+                                       foe_in + self._through_length(foe_via), True,
+                                       float(veh.getSpeed(v)), length, foe_via, width))
+        return out
+
+    def _via_of(self, vid: str, lane: str) -> str:
+        """The internal lane that vehicle ``vid`` on ``lane`` takes next, read from SUMO
+        once per vehicle and lane (a reroute seldom changes the turn from the lane a
+        vehicle is on)."""
+        key = (vid, lane)
+        via = self._next_via.get(key)
+        if via is None:
+            links = self.sumo.vehicle.getNextLinks(vid)
+            via = self._next_via[key] = str(links[0][4]) if links else ""
+        return via
+
+    def _length(self, lane: str) -> float:
+        """A lane's length [m], read from SUMO the first time only."""
+        length = self._lengths.get(lane)
+        if length is None:
+            length = self._lengths[lane] = float(self.sumo.lane.getLength(lane))
+        return length
+
+    def _through_length(self, via: str) -> float:
+        """Length [m] of a junction's lanes from internal lane ``via`` on to the lane after
+        the junction (a left turn with a waiting place has two)."""
+        total = self._through.get(via)
+        if total is None:
+            total, lane = 0.0, via
+            for _ in range(8):
+                total += self._length(lane)
+                nxt = self.sumo.lane.getLinks(lane)
+                if not nxt or not nxt[0][4]:
+                    break
+                lane = str(nxt[0][4])
+            self._through[via] = total
+        return total
 
     def places(self, vids: tuple[str, ...]) -> tuple[LanePlace, ...]:
         """Where SUMO has each of ``vids`` (read once a step, whichever planned vehicle
@@ -439,6 +557,7 @@ class World:
 
     def set_route(self, vid: str, edges: list[str]) -> None:
         """Give a vehicle a new route (its current edge first)."""
+        self._next_link = {k: v for k, v in self._next_link.items() if k[0] != vid}
         try:
             self.sumo.vehicle.setRoute(vid, list(edges))
         except Exception as err:
