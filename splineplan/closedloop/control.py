@@ -527,8 +527,11 @@ class Control(Perception):
         by the safety margin, of standing vehicles by :data:`PATH_MARGIN`. Where a body
         comes that near the ego's footprint on its path ahead, and the ego would be there
         within :data:`YIELD_GAP` of the time the body is, the ego stops before that place,
-        if it still can at its emergency braking (else it goes on, to clear it). Only
-        caps below ``cap`` are looked for."""
+        if it still can at its emergency braking (else it goes on, to clear it). Within
+        the margin of a moving body's sweep already, it waits where it is unless the body
+        overlaps it there; and where ``cap`` (the other rules) would stand it inside a
+        sweep before the body has passed, it stands before the sweep. Only caps below
+        ``cap`` are looked for."""
         if self.traj is None or cap <= 0.0:
             return math.inf
         out = math.inf
