@@ -709,6 +709,29 @@ def test_a_crossing_planned_car_is_trusted_only_while_it_moves() -> None:
     assert not trusted(0.0) and not trusted(0.5 * QUEUE_SPEED)
 
 
+@given(st.dictionaries(st.sampled_from("abcdefg"),
+                       st.lists(st.sampled_from("abcdefgxy"), max_size=3).map(tuple),
+                       min_size=1), st.sampled_from("abcdefg"))
+def test_a_cycle_of_waits_is_found_where_there_is_one(
+        holds: dict[str, tuple[str, ...]], start: str) -> None:
+    """The deadlock watch's search: a cycle from a standing vehicle round to it, each
+    held by the next, exactly where one exists (reachability by closure the judge); the
+    vehicles not standing (``x``, ``y``) end a chain."""
+    from splineplan.closedloop.cooperate import waits_in_cycle
+
+    cycle = waits_in_cycle(holds, start)
+    reach = {w for w in holds.get(start, ()) if w in holds}
+    while True:
+        more = {u for w in reach for u in holds[w] if u in holds} - reach
+        if not more:
+            break
+        reach |= more
+    assert (cycle is not None) == (start in holds and start in reach)
+    if cycle is not None:
+        assert cycle[0] == start and len(set(cycle)) == len(cycle)
+        assert all(b in holds[a] for a, b in zip(cycle, [*cycle[1:], start], strict=True))
+
+
 def test_plan_keeps_clear_of_others_plans() -> None:
     """The check that spares a replan when others publish new plans: a plan through a
     crossing keeps clear of one that crosses 5 s later, not of one that crosses at the

@@ -87,6 +87,8 @@ class DriverState:
     board_seen: int  # the board's count of plans when this one last planned
     trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among
     why_slow: str
+    slowed_by: tuple[str, ...]
+    released: dict[str, float]
     held_by: str
     wait_replan_at: float
     conflicts: list[dict[str, Any]]

@@ -102,7 +102,7 @@ class Control(Perception):
         """
         self.signals = signals
         if self.traj is None:
-            self.why_slow = f"no plan ({self.reason})" if self.reason else "no plan yet"
+            self._hold(f"no plan ({self.reason})" if self.reason else "no plan yet")
             self.held_by = self.why_slow
             return self._move()
         sc, ego = self.sc, self.sc.ego
@@ -112,7 +112,7 @@ class Control(Perception):
         u_next = self.u + self.v * dt + 0.5 * tp.a_max * dt * dt
         ps, px, py, ph, pv2 = self._pl
         v_plan = math.sqrt(max(_interp(u_next, ps, pv2), 0.0))
-        self.why_slow = ""
+        self._hold("")
         v_cap, limited = self._gap_speed()
         if self.stop_at is not None:
             v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (self.stop_at - self.u), 0.0)))
@@ -122,9 +122,10 @@ class Control(Perception):
         v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (end - self.u), 0.0)))
         v_target = min(v_plan, v_cap)
         if self.stop_at is not None and not self.why_slow:
-            self.why_slow = f"stopping before a blockage ({self.reason})"
+            self._hold(f"stopping before a blockage ({self.reason})")
         if v_plan < v_cap and self.waiting_for:
-            self.why_slow = f"waiting for the published plan of {self._waited_for()}"
+            self._hold(f"waiting for the published plan of {self._waited_for()}",
+                       *self.waiting_for)
         emergency = EMERGENCY_FACTOR * tp.b_max
         v_new = min(max(v_target, self.v - emergency * dt), self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
@@ -142,6 +143,11 @@ class Control(Perception):
         self.pose = np.array([x, y, h])
         del ego
         return self._move(x, y, h)
+
+    def _hold(self, why: str, *by: str) -> None:
+        """Say what holds the vehicle back (``why_slow``) and which vehicles
+        (``slowed_by``)."""
+        self.why_slow, self.slowed_by = why, by
 
     def _waited_for(self) -> str:
         """The vehicles whose published plans this one waits for, quoted, for ``why_slow``."""
@@ -226,45 +232,54 @@ class Control(Perception):
                     stop_front = (full_s[first] - sim.min_gap if v_l < QUEUE_SPEED
                                   else None)
         if gap_to >= 0:
-            self.why_slow = f"keeping its gap to vehicle '{o.ids[gap_to]}' ahead"
+            self._hold(f"keeping its gap to vehicle '{o.ids[gap_to]}' ahead", o.ids[gap_to])
             if self.keep_clear and stop_front is not None:
                 clear = self._keep_clear_speed(stop_front)
                 if clear < cap:
                     cap = clear
-                    self.why_slow = (f"keeping the junction clear: vehicle "
-                                     f"'{o.ids[gap_to]}' stands beyond it")
+                    self._hold(f"keeping the junction clear: vehicle '{o.ids[gap_to]}' "
+                               "stands beyond it", o.ids[gap_to])
             if stop_front is not None:
                 # not across a lane line behind a queue: before the lane change instead
                 stand = stop_front - ego.length / 2.0 - self.u
                 before = self._before_change(stand)
                 if before < stand and self._stand_within(before) < cap:
                     cap = self._stand_within(before)
-                    self.why_slow = (f"waiting before its lane change: vehicle "
-                                     f"'{o.ids[gap_to]}' stands beyond it")
+                    self._hold(f"waiting before its lane change: vehicle "
+                               f"'{o.ids[gap_to]}' stands beyond it", o.ids[gap_to])
         if self.keep_clear and self.waiting_for and self.plan_wait is not None:
             # its plan waits for another's inside a junction: wait before it instead
             clear = self._keep_clear_speed(self.plan_wait + ego.length / 2.0)
             if clear < cap:
                 cap = clear
-                self.why_slow = ("keeping the junction clear while it waits for the "
-                                 f"published plan of {self._waited_for()}")
+                self._hold("keeping the junction clear while it waits for the published "
+                           f"plan of {self._waited_for()}", *self.waiting_for)
+        held = (self.why_slow, self.slowed_by)
         red, give = self._red_light_speed(), self._yield_speed()
+        give_held = (self.why_slow, self.slowed_by)  # set by _yield_speed
+        self.why_slow, self.slowed_by = held
         if red < cap:
-            cap, self.why_slow = red, "stopping at a red light"
+            cap = red
+            self._hold("stopping at a red light")
         stop = self._stop_sign_speed()
         if stop < cap:
-            cap, self.why_slow = stop, "stopping at a stop sign"
+            cap = stop
+            self._hold("stopping at a stop sign")
         allway = self._allway_speed(cap)
         if allway < cap:
             cap = allway  # (why_slow set by _allway_speed)
         if give < cap:
-            cap = give  # (why_slow set by _yield_speed)
+            cap = give
+            self.why_slow, self.slowed_by = give_held
         body = self._body_speed(cap)
         if body < cap:
             cap = body  # (why_slow set by _body_speed)
+        held = (self.why_slow, self.slowed_by)
         change = self._change_speed()
         if change < cap:
             cap = change  # (why_slow set by _change_speed)
+        else:
+            self.why_slow, self.slowed_by = held
         return cap, int(math.isfinite(cap))
 
     def _keep_clear_speed(self, stop_front: float) -> float:
@@ -401,8 +416,8 @@ class Control(Perception):
             c = self._stop_short(min(ego_in, self._lane_reach(foe.foe_lane, foe.foe_width)))
             if c < cap:
                 cap = c
-                self.why_slow = (f"giving way at a junction to vehicle '{foe.id}', as "
-                                 "SUMO's right of way says")
+                self._hold(f"giving way at a junction to vehicle '{foe.id}', as SUMO's "
+                           "right of way says", foe.id)
         return cap
 
     def _goes_first(self, foe: JunctionFoe) -> bool:
@@ -445,7 +460,8 @@ class Control(Perception):
             return math.inf
         c = self._stop_short(line - front)
         if c < cap:
-            self.why_slow = (f"giving way at an all-way stop to vehicle '{o.ids[foes[0]]}'")
+            self._hold(f"giving way at an all-way stop to vehicle '{o.ids[foes[0]]}'",
+                       o.ids[foes[0]])
         return c
 
     def _junction_circle(self, edge: str) -> tuple[FloatArray, float]:
@@ -539,7 +555,7 @@ class Control(Perception):
         # waits, and a body that comes by later must find it before its sweep
         b = self.sc.trajectory.b_max
         stand = cap * cap / (2.0 * b) + self.v * self.dt if cap < self.v else math.inf
-        for s_in, s_out, t_in_b, t_out_b, why, touch in self._bodies_meeting():
+        for s_in, s_out, t_in_b, t_out_b, (why, by), touch in self._bodies_meeting():
             if s_in <= self.u and touch is not None:
                 # within the margin of the sweep already: wait where the footprint is
                 # rather than drive on into the body, unless it overlaps it here
@@ -548,15 +564,18 @@ class Control(Perception):
             if math.isinf(c) and s_in > self.u and stand >= s_in - self.u and t_out_b > 0.0:
                 c = self._stop_short(s_in - self.u)  # it would wait inside the sweep
             if c < min(out, cap):
-                out, self.why_slow = c, why
+                out = c
+                self._hold(why, *by)
         return out
 
-    def _bodies_meeting(self) -> list[tuple[float, float, float, float, str,
+    def _bodies_meeting(self) -> list[tuple[float, float, float, float,
+                                            tuple[str, tuple[str, ...]],
                                             tuple[float, float, float, float] | None]]:
         """Where (first and last station on the plan [m]) and when (first and last time
         [s] from now) bodies meet the ego's footprint on its path ahead, and what to say
-        of each (:meth:`_body_speed`): each moving long vehicle's, and the standing
-        vehicles' of each size together; all in one pass (:func:`~.bodies.meetings`).
+        of each, with the vehicle where it is one (:meth:`_body_speed`): each moving long
+        vehicle's, and the standing vehicles' of each size together; all in one pass
+        (:func:`~.bodies.meetings`).
         For a moving long vehicle, also where and when its body overlaps the footprint
         (no margin; ``None`` where it does not, and for the standing ones)."""
         o = self.others
@@ -570,7 +589,7 @@ class Control(Perception):
             return []
         path = (s[lo:hi], self.full_xy[lo:hi], self.full_heading[lo:hi])
         rows: list[tuple[FloatArray, FloatArray, FloatArray, float, float, float]] = []
-        whys: list[str] = []
+        whys: list[tuple[str, tuple[str, ...]]] = []
         last: list[float] = []  # a body still meeting at this time stays
         touching: list[bool] = []  # a row without the margin (follows its margin's row)
         where = {o.ids[i]: i for i in np.flatnonzero(o.length >= LONG_VEHICLE).tolist()}
@@ -587,7 +606,7 @@ class Control(Perception):
                    "junction")
             for margin in (sc.roadmap.safety_margin, 0.0):  # the margin, then touching
                 rows.append((times, centres, heads, length, width, margin))
-                whys.append(why)
+                whys.append((why, (place.id,)))
                 last.append(float(times[-1]))
                 touching.append(margin == 0.0)
         # standing vehicles near the path ahead, by size (few sizes)
@@ -602,7 +621,7 @@ class Control(Perception):
             group = standing[(o.length[standing] == dims[0]) & (o.width[standing] == dims[1])]
             rows.append((np.zeros(len(group)), o.centre[group], o.head[group], dims[0],
                          dims[1], margin))
-            whys.append("keeping its body off a standing vehicle beside its path")
+            whys.append(("keeping its body off a standing vehicle beside its path", ()))
             last.append(0.0)
             touching.append(False)
         if not rows:
@@ -621,11 +640,11 @@ class Control(Perception):
                 t_out = math.inf  # still there at the horizon
             spans.append(None if math.isnan(s_in) else (s_in, s_out, t_in, t_out))
         found = []
-        for k, (span, why, touch) in enumerate(zip(spans, whys, touching, strict=True)):
+        for k, (span, said, touch) in enumerate(zip(spans, whys, touching, strict=True)):
             if span is None or touch:
                 continue
             bare = spans[k + 1] if k + 1 < len(spans) and touching[k + 1] else None
-            found.append((*span, why, bare))
+            found.append((*span, said, bare))
         return found
 
     def _give_way(self, s_in: float, s_out: float, t_in_b: float, t_out_b: float) -> float:
@@ -715,8 +734,8 @@ class Control(Perception):
                 need = v_o * CHANGE_GAP_TIME + max(v_o - v_e, 0.0) ** 2 / (2.0 * tp.b_max)
                 short = -d - half < max(CHANGE_MIN_GAP, need)
             if short:
-                self.why_slow = (f"waiting for a gap to change lanes (vehicle '{o.ids[j]}' "
-                                 "in the lane)")
+                self._hold(f"waiting for a gap to change lanes (vehicle '{o.ids[j]}' in "
+                           "the lane)", o.ids[j])
                 if self.keep_clear:  # not inside the junction the change reaches into
                     stop = min(stop, self._keep_clear_speed(ch.at - YIELD_STOP
                                                             + ego.length / 2.0))

@@ -54,8 +54,8 @@ class Published:
 
 
 def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: FloatArray,
-                 heading: FloatArray, t0: float, *, pad: float = 0.0, after: int = -1
-                 ) -> list[MovingObstacle]:
+                 heading: FloatArray, t0: float, *, pad: float = 0.0, after: int = -1,
+                 released: Mapping[str, float] | None = None) -> list[MovingObstacle]:
     """The published plans of the vehicles before ``me`` in priority that are still to
     come (after ``t0`` [s]) and come within :data:`NEAR` of the path ``xy`` ``(n, 2)``
     (headings ``(n,)`` [rad]).
@@ -65,6 +65,8 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
     is to wait that far from it (the time-gap control's standstill distance), not only the
     safety margin; plans along the path are not, so that two vehicles may drive side by
     side. ``after``: only plans published after the board's count was that.
+    ``released``: vehicles whose plans are left out until the time [s] given (a wait
+    released from a deadlock, :func:`waits_in_cycle`).
     """
     if not board or not len(xy):
         return []
@@ -73,6 +75,8 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
     out = []
     for vid, pub in board.items():
         if vid == me or pub.priority >= priority or pub.seq <= after:
+            continue
+        if released and released.get(vid, -math.inf) > t0:
             continue
         p = pub.plan
         if p.t[-1] < t0 and not p.stays:
@@ -87,6 +91,34 @@ def plans_before(board: Mapping[str, Published], me: str, priority: int, xy: Flo
             p = replace(p, length=p.length + 2.0 * pad, width=p.width + 2.0 * pad)
         out.append(p)
     return out
+
+
+def waits_in_cycle(holds: Mapping[str, tuple[str, ...]], start: str) -> list[str] | None:
+    """A cycle of standing vehicles each held by the next, from ``start`` round to the one
+    that holds ``start`` (``start`` first), or ``None``.
+
+    ``holds``: for each standing vehicle, the vehicles that hold it back (its speed
+    control's reason). Planned vehicles that wait for each other this way, one for
+    another's published plan and that one for a gap the first stands in, stand for
+    ever: the run releases such a wait (:class:`~.run._Run`)."""
+    path = [start]
+    seen = {start}
+
+    def search(v: str) -> list[str] | None:
+        for w in holds.get(v, ()):
+            if w == start:
+                return list(path)
+            if w in seen or w not in holds:
+                continue
+            seen.add(w)
+            path.append(w)
+            found = search(w)
+            if found is not None:
+                return found
+            path.pop()
+        return None
+
+    return search(start)
 
 
 def _crosses(plan: MovingObstacle, xy: FloatArray, heading: FloatArray,

@@ -132,6 +132,10 @@ class Driver(Replanning, Control):
         self.go_at = 0.0  # when its plan has it move on, while it waits [s]
         self.conflicts: list[dict[str, Any]] = []
         self.why_slow = ""  # what holds the vehicle back (speed control), in words
+        self.slowed_by: tuple[str, ...] = ()  # the vehicles that do (named in why_slow)
+        # vehicle id -> until when [s] this one does not wait for its published plans
+        # (released from a deadlock, see .cooperate.waits_in_cycle)
+        self.released: dict[str, float] = {}
         self.held_by = ""  # the same where it held the last step's speed below the plan's
         self.stand_since: float | None = None
         self.stuck: list[dict[str, Any]] = []  # stands longer than STUCK_AFTER
@@ -283,6 +287,16 @@ class Driver(Replanning, Control):
                            "station": self.station, "why": why})
         log.warning("t=%.1f vehicle '%s' has not moved for %.0f s on lane '%s': %s", now,
                     self.ego, now - self.stand_since, self.last_lane, why)
+
+    def release(self, vid: str, until: float, cycle: list[str]) -> None:
+        """Stop waiting for the published plans of vehicle ``vid`` until ``until`` [s],
+        and plan again: this one and ``vid`` stand in a ``cycle`` of waits (its ids in
+        order, each held by the next)."""
+        self.released[vid] = until
+        chain = " -> ".join(f"'{v}'" for v in [*cycle, cycle[0]])
+        log.info("t=%.1f vehicle '%s' stops waiting for the plan of '%s': they stand in a "
+                 "cycle of waits (%s)", self.time, self.ego, vid, chain)
+        self._replan("deadlock", f"stops waiting for the plan of '{vid}' (waits: {chain})")
 
     def maybe_replan(self) -> None:
         """Plan at the start, then whenever needed (:meth:`_maybe_replan`)."""

@@ -563,7 +563,7 @@ class Replanning(Perception):
             return []
         plans = plans_before(self.board, self.ego, self.priority, self.path_xy,
                              self.path_heading, self.time, pad=self.sc.sim.min_gap,
-                             after=self.board_seen)
+                             after=self.board_seen, released=self.released)
         return sorted(plans, key=lambda p: p.id)
 
     def _clear_of(self, plans: list[MovingObstacle]) -> bool:
@@ -585,7 +585,8 @@ class Replanning(Perception):
         sc, ego = self.sc, self.sc.ego
         self.board_seen = max((p.seq for p in self.board.values()), default=0)
         plans = plans_before(self.board, self.ego, self.priority, np.asarray(traj.xy),
-                             np.asarray(traj.heading), self.time, pad=sc.sim.min_gap)
+                             np.asarray(traj.heading), self.time, pad=sc.sim.min_gap,
+                             released=self.released)
         self.waiting_for = ()
         self.trusted = {}
         if not plans:

@@ -32,7 +32,7 @@ import numpy as np
 from splineplan._signals import sigint_deferred, sigint_ignored
 from splineplan.closedloop.bodies import LONG_VEHICLE
 from splineplan.closedloop.control import EMERGENCY_FACTOR, YIELD_EDGE
-from splineplan.closedloop.cooperate import Published
+from splineplan.closedloop.cooperate import Published, waits_in_cycle
 from splineplan.closedloop.driver import DRIVERS, Driver, DriverKind
 from splineplan.closedloop.record import (
     RunTotals,
@@ -67,6 +67,10 @@ MAX_PLAN_PICTURES = 40
 #: Warnings of one kind that a run with several planned vehicles writes to ``sumo.log`` in
 #: full; SUMO counts the rest (``--aggregate-warnings``).
 AGGREGATE_WARNINGS = 50
+#: Seconds planned vehicles stand in a cycle of waits before one stops waiting for the
+#: next one's plan, and for how long [s] it does not wait for that vehicle's plans.
+DEADLOCK_WAIT = 5.0
+RELEASE_FOR = 10.0
 
 
 def simulate(
@@ -514,11 +518,38 @@ class _Run:
                 if d.route_request is not None:
                     edges, d.route_request = d.route_request, None
                     self.world.set_route(d.ego, edges)
-                if d.published_plan is not None:
-                    self._published += 1
-                    self.board[d.ego] = Published(d.priority, d.published_plan,
-                                                  self._published)
-                    d.published_plan = None
+                self._publish(d)
+        self._release_deadlocks()
+
+    def _publish(self, d: Driver) -> None:
+        """Put a driver's new plan on the board."""
+        if d.published_plan is not None:
+            self._published += 1
+            self.board[d.ego] = Published(d.priority, d.published_plan, self._published)
+            d.published_plan = None
+
+    def _release_deadlocks(self) -> None:
+        """Planned vehicles standing for :data:`DEADLOCK_WAIT` in a cycle, each held by
+        the next (:func:`~.cooperate.waits_in_cycle`), where one waits for the next one's
+        published plan: that one stops waiting for it for :data:`RELEASE_FOR` and plans
+        again. The plan it waits for cannot be driven while it stands in its way (its
+        vehicle waits for a gap where it stands, or behind it); its speed control still
+        sees that vehicle as SUMO's drivers see each other."""
+        holds = {d.ego: d.slowed_by for d in self.drivers
+                 if d.in_sim and d.kind == "planner" and d.slowed_by
+                 and d.stand_since is not None
+                 and self.time - d.stand_since >= DEADLOCK_WAIT - 1e-9}
+        if len(holds) < 2:
+            return
+        for d in self.drivers:
+            if d.ego not in holds or not d.waiting_for:
+                continue
+            cycle = waits_in_cycle(holds, d.ego)
+            if cycle is None or len(cycle) < 2 or cycle[1] not in d.waiting_for:
+                continue
+            d.release(cycle[1], self.time + RELEASE_FOR, cycle)
+            self._publish(d)
+            holds.pop(d.ego)
 
     # -- end ----------------------------------------------------------------------------------
     def fail(self, err: BaseException) -> None:
