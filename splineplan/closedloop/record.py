@@ -272,6 +272,7 @@ def run_summary(run: Any, results: dict[str, SimResult]) -> dict[str, Any]:
         "min_clearance_planned_vehicles": min(gaps) if gaps else None,
         "sumo_collision_reports": len(run.sumo_collisions),
         "teleports": run.teleports,
+        "deadlocks": run.deadlocks,
         "sim_time_end": run.time,
         "wall_time": run.wall_time,
         "wall_time_sumo": run.world.seconds,

@@ -218,6 +218,9 @@ class _Run:
         self._bodies_after: dict[Any, Any] = {}
         self._entered = 0
         self._published = 0  # plans published so far
+        # cycles of planned vehicles standing, each held by the next (_release_deadlocks)
+        self.deadlocks: list[dict[str, Any]] = []
+        self._cycles_seen: set[frozenset[str]] = set()
         self.sizes: dict[str, tuple[float, float]] = {}  # vehicle types' length, width
         self._junctions: list[Any] = []
         self._polygons: Any = None
@@ -530,11 +533,12 @@ class _Run:
 
     def _release_deadlocks(self) -> None:
         """Planned vehicles standing for :data:`DEADLOCK_WAIT` in a cycle, each held by
-        the next (:func:`~.cooperate.waits_in_cycle`), where one waits for the next one's
-        published plan: that one stops waiting for it for :data:`RELEASE_FOR` and plans
-        again. The plan it waits for cannot be driven while it stands in its way (its
-        vehicle waits for a gap where it stands, or behind it); its speed control still
-        sees that vehicle as SUMO's drivers see each other."""
+        the next (:func:`~.cooperate.waits_in_cycle`): the cycle is recorded once
+        (``deadlocks``, with when it was found) and logged. Where one of them waits for the
+        next one's published plan, that one stops waiting for it for :data:`RELEASE_FOR`
+        and plans again: the plan it waits for cannot be driven while it stands in its
+        way (its vehicle waits for a gap where it stands, or behind it); its speed control
+        still sees that vehicle as SUMO's drivers see each other."""
         holds = {d.ego: d.slowed_by for d in self.drivers
                  if d.in_sim and d.kind == "planner" and d.slowed_by
                  and d.stand_since is not None
@@ -542,14 +546,24 @@ class _Run:
         if len(holds) < 2:
             return
         for d in self.drivers:
-            if d.ego not in holds or not d.waiting_for:
+            if d.ego not in holds:
                 continue
             cycle = waits_in_cycle(holds, d.ego)
-            if cycle is None or len(cycle) < 2 or cycle[1] not in d.waiting_for:
+            if cycle is None or len(cycle) < 2:
                 continue
-            d.release(cycle[1], self.time + RELEASE_FOR, cycle)
-            self._publish(d)
-            holds.pop(d.ego)
+            members = frozenset(cycle)
+            if members not in self._cycles_seen:
+                self._cycles_seen.add(members)
+                chain = " -> ".join(f"'{v}'" for v in [*cycle, cycle[0]])
+                why = {x.ego: x.why_slow for x in self.drivers if x.ego in members}
+                self.deadlocks.append({"time": self.time, "vehicles": cycle,
+                                       "why": [why[v] for v in cycle]})
+                log.warning("t=%.1f planned vehicles stand in a cycle of waits: %s",
+                            self.time, chain)
+            if cycle[1] in d.waiting_for:
+                d.release(cycle[1], self.time + RELEASE_FOR, cycle)
+                self._publish(d)
+                holds.pop(d.ego)
 
     # -- end ----------------------------------------------------------------------------------
     def fail(self, err: BaseException) -> None:
