@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -254,10 +255,7 @@ class Control(Perception):
                 cap = clear
                 self._hold("keeping the junction clear while it waits for the published "
                            f"plan of {self._waited_for()}", *self.waiting_for)
-        held = (self.why_slow, self.slowed_by)
-        red, give = self._red_light_speed(), self._yield_speed()
-        give_held = (self.why_slow, self.slowed_by)  # set by _yield_speed
-        self.why_slow, self.slowed_by = held
+        red = self._red_light_speed()
         if red < cap:
             cap = red
             self._hold("stopping at a red light")
@@ -265,22 +263,21 @@ class Control(Perception):
         if stop < cap:
             cap = stop
             self._hold("stopping at a stop sign")
-        allway = self._allway_speed(cap)
-        if allway < cap:
-            cap = allway  # (why_slow set by _allway_speed)
-        if give < cap:
-            cap = give
-            self.why_slow, self.slowed_by = give_held
-        body = self._body_speed(cap)
-        if body < cap:
-            cap = body  # (why_slow set by _body_speed)
-        held = (self.why_slow, self.slowed_by)
-        change = self._change_speed()
-        if change < cap:
-            cap = change  # (why_slow set by _change_speed)
-        else:
-            self.why_slow, self.slowed_by = held
+        # (why_slow set by each of these where it caps the speed)
+        cap = min(cap, self._allway_speed(cap))
+        cap = min(cap, self._only_below(self._yield_speed, cap))
+        cap = min(cap, self._body_speed(cap))
+        cap = min(cap, self._only_below(self._change_speed, cap))
         return cap, int(math.isfinite(cap))
+
+    def _only_below(self, rule: Callable[[], float], cap: float) -> float:
+        """The speed cap [m/s] of ``rule``; what it says holds the vehicle back is kept
+        only where that cap is below ``cap`` (the other rules')."""
+        held = (self.why_slow, self.slowed_by)
+        c = rule()
+        if c >= cap:
+            self.why_slow, self.slowed_by = held
+        return c
 
     def _keep_clear_speed(self, stop_front: float) -> float:
         """Speed cap [m/s] that keeps a junction clear, as SUMO's drivers do: where the
