@@ -19,7 +19,8 @@ Both solutions are judged by the same checks (:func:`splineplan.commonroad.certi
 collisions with every obstacle at its time, the road boundary, ``trajectory_feasibility``
 with the KS model, the goal reached, the start state).
 
-``python -m benchmarks commonroad [--scenarios DIR] [--limit N] [--no-peer] [--json FILE]``
+``python -m benchmarks commonroad [--scenarios DIR] [--limit N] [--no-peer] [--json FILE]
+[--speed-limits]``
 """
 
 from __future__ import annotations
@@ -66,7 +67,7 @@ def _time_limit(seconds: int) -> Iterator[None]:
         signal.signal(signal.SIGALRM, old)
 
 
-def _splineplan(path: Path) -> dict[str, Any]:
+def _splineplan(path: Path, speed_limits: bool = False) -> dict[str, Any]:
     from splineplan import commonroad as cr
     from splineplan.errors import SplineplanError
 
@@ -77,7 +78,7 @@ def _splineplan(path: Path) -> dict[str, Any]:
     t0 = time.perf_counter()
     c0 = time.process_time()
     try:
-        res = cr.plan(problem)
+        res = cr.plan(problem, speed_limits=speed_limits)
         cpu = time.process_time() - c0
     except SplineplanError as err:
         row.update(error=str(err), plan_ms=1e3 * (time.perf_counter() - t0), passed=False)
@@ -213,6 +214,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--peer-budget", type=float, default=60.0, metavar="S",
                     help="planning time [s] after which a reactive planner run stops (60)")
     ap.add_argument("--json", type=Path, help="write every row to this file")
+    ap.add_argument("--speed-limits", action="store_true",
+                    help="splineplan keeps to the speed limits the traffic signs post")
     args = ap.parse_args(argv)
     os.environ.setdefault("PROTOCOL_BUFFERS_PYTHON_IMPLEMENTATION", "python")
     warnings.filterwarnings("ignore")
@@ -238,7 +241,7 @@ def main(argv: list[str] | None = None) -> None:
         for path in paths:
             line = f"{path.stem:<28}"
             if not args.only_peer:
-                row = _splineplan(path)
+                row = _splineplan(path, args.speed_limits)
                 ours.append(row)
                 line += (f" splineplan {'PASS' if row['passed'] else 'fail'} "
                          f"{row['plan_ms']:7.1f} ms "

@@ -641,6 +641,8 @@ def _add_commonroad(sub: argparse._SubParsersAction) -> None:
                    help="CommonRoad vehicle type: 1 Ford Escort, 2 BMW 320i, 3 VW Vanagon (2)")
     p.add_argument("--planning-problem", type=_int_in(0), default=None, metavar="ID",
                    help="which planning problem (default: the first)")
+    p.add_argument("--speed-limits", action="store_true",
+                   help="keep to the speed limits that the scenario's traffic signs post")
     p.set_defaults(func=_cmd_commonroad)
 
 
@@ -650,7 +652,7 @@ def _cmd_commonroad(args: argparse.Namespace) -> int:
     out = _out_dir(args.out)
     car = cr.vehicle(args.vehicle_type)  # an unknown type is refused before any work
     problem = cr.read(args.scenario, planning_problem_id=args.planning_problem)
-    res = cr.plan(problem, vehicle_type=car.type_id)
+    res = cr.plan(problem, vehicle_type=car.type_id, speed_limits=args.speed_limits)
     written = cr.write_solution(res, out)
     name = str(problem.scenario.scenario_id)
     if args.plot:

@@ -34,7 +34,7 @@ import functools
 import logging
 import math
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -753,8 +753,13 @@ class CommonRoadPlan:
 
 
 def plan(problem: Problem, *, vehicle_type: int = 2,
-         roadmap_params: RoadmapParams | None = None) -> CommonRoadPlan:
-    """Solve the planning problem (see the module docstring)."""
+         roadmap_params: RoadmapParams | None = None,
+         speed_limits: bool = False) -> CommonRoadPlan:
+    """Solve the planning problem (see the module docstring). ``speed_limits``: keep to
+    the limits the scenario's ``MAX_SPEED`` traffic signs post on the route's lanelets
+    (:func:`posted_speed_limits`; the top speed is then the highest of them where the
+    goal asks for no speed); otherwise the top speed is the start's, or 50 km/h, or the
+    goal's upper speed."""
 
     car = vehicle(vehicle_type)
     t_start = time.perf_counter()
@@ -783,6 +788,9 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     else:
         route = follow_road(net, start_ids[0], s_top * horizon * problem.dt + 50.0)
     statics = static_obstacles(sc)
+    posted = _Posted.of(net, route, s_top) if speed_limits else None
+    if posted is not None and not any(v is not None for v in goal.speed):
+        s_top = max(v0, *posted.on_route)  # the road's own limits, where posted
     tp = car.trajectory_params(max(s_top, 1.0))
     road_ends = not any(net.find_lanelet_by_id(route.chain[-1]).successor)
 
@@ -795,7 +803,7 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     end_speed = 0.0 if road_ends else None
     t0 = float(init.time_step) * problem.dt
     timing = _Timing(tp, goal, v0, problem.dt, int(init.time_step), t0, end_speed, moving,
-                     car)
+                     car, posted)
     solver = _Solver(statics, centre0, head0, rp, tp, min(v0, tp.s_max), end_speed, car,
                      timing)
     try:
@@ -976,6 +984,64 @@ def _goal_top_speed(goal: Goal, v0: float) -> float:
     return max(v0, min(highs)) if highs else max(v0, 13.89)
 
 
+def posted_speed_limits(network: Any) -> dict[int, float]:
+    """The posted speed limit [m/s] of each lanelet that has one: the lowest of its
+    ``MAX_SPEED`` traffic signs."""
+    signs: dict[int, float] = {}
+    for sign in network.traffic_signs:
+        for el in sign.traffic_sign_elements:
+            if el.traffic_sign_element_id.name != "MAX_SPEED" or not el.additional_values:
+                continue
+            try:
+                v = float(el.additional_values[0])
+            except (TypeError, ValueError):
+                continue
+            if v > 0.0 and math.isfinite(v):
+                signs[sign.traffic_sign_id] = min(v, signs.get(sign.traffic_sign_id, math.inf))
+    out: dict[int, float] = {}
+    for ll in network.lanelets:
+        posted = [signs[i] for i in ll.traffic_signs if i in signs]
+        if posted:
+            out[ll.lanelet_id] = min(posted)
+    return out
+
+
+@dataclass(frozen=True, eq=False)
+class _Posted:
+    """The posted speed limits along a route (:func:`posted_speed_limits`); ``default``
+    [m/s] where the lanelets under a point post none."""
+
+    network: Any
+    limits: Mapping[int, float]
+    route: frozenset[int]
+    default: float
+
+    @classmethod
+    def of(cls, network: Any, route: LaneletRoute, default: float) -> _Posted | None:
+        """The route's posted limits; ``None`` where none of its lanelets posts one."""
+        limits = posted_speed_limits(network)
+        if not any(i in limits for i in route.lanelets):
+            return None
+        return cls(network, limits, frozenset(route.lanelets), default)
+
+    @property
+    def on_route(self) -> list[float]:
+        """The limits posted on the route's lanelets [m/s]."""
+        return [self.limits[i] for i in self.route if i in self.limits]
+
+    def at(self, xy: FloatArray) -> FloatArray:
+        """The limit [m/s] at points ``(n, 2)`` [m]: the lowest posted on the route's
+        lanelets under each (on any lanelet under it, where it is on none of the route's)."""
+        out = np.full(len(xy), self.default)
+        found = self.network.find_lanelet_by_position([p for p in np.asarray(xy, dtype=float)])
+        for k, ids in enumerate(found):
+            mine = [i for i in ids if i in self.route] or list(ids)
+            posted = [self.limits[i] for i in mine if i in self.limits]
+            if posted:
+                out[k] = min(posted)
+        return out
+
+
 def _start_lanelets(network: Any, xy: FloatArray, heading: float, source: str) -> list[int]:
     """The lanelets under the start, the one best aligned with its heading first."""
     found = network.find_lanelet_by_position([xy])[0]
@@ -1008,6 +1074,7 @@ class _Timing:
     end_speed: float | None
     moving: list[Any]
     car: Vehicle
+    posted: _Posted | None = None
 
     def reaches(self, tr: Trajectory) -> bool:
         """Whether the timed trajectory reaches the goal."""
@@ -1022,6 +1089,8 @@ class _Timing:
         (along its path) in the middle of the time window; a few caps around it and a
         coarse scan follow if that state misses the goal (its speed or orientation)."""
         limit = speed_limit(tr.s, tr.curvature, self.tp)
+        if self.posted is not None:  # from the start's speed, braking to the limit
+            limit = np.minimum(limit, np.maximum(self.posted.at(tr.xy), self._braking(tr.s)))
         inside = self.goal.inside(tr.xy)
         highs = [v[1] for v in self.goal.speed if v is not None]
         if highs and inside.any():
@@ -1155,12 +1224,15 @@ class _Timing:
             return cand, (plan if self.moving else None)
         return None
 
+    def _braking(self, s: FloatArray) -> FloatArray:
+        """The speed [m/s] at stations ``s`` [m] braking at ``b_max`` from the start's."""
+        return np.sqrt(np.maximum(self.v0**2 - 2.0 * self.tp.b_max * s, 0.0))
+
     def timed(self, tr: Trajectory, limit: FloatArray, cap: float, *, alone: bool = False
               ) -> tuple[Trajectory, Any]:
         """The path with its speed under ``cap`` [m/s]; the cap applies from where braking
         from the start's speed reaches it. ``alone``: without the moving obstacles."""
-        brake = np.sqrt(np.maximum(self.v0**2 - 2.0 * self.tp.b_max * tr.s, 0.0))
-        lim = np.minimum(limit, np.maximum(cap, brake))
+        lim = np.minimum(limit, np.maximum(cap, self._braking(tr.s)))
         if alone or not self.moving:
             v = speed_profile(tr.s, lim, a_max=self.tp.a_max, b_max=self.tp.b_max,
                               start_speed=min(self.v0, float(lim[0])),

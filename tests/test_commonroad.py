@@ -327,3 +327,29 @@ def test_a_plan_that_misses_its_goal_stops_inside_the_road(
     end = net.find_lanelet_by_id(res.route.chain[-1]).center_vertices[-1]
     front = _ks_boxes(res)[-1]
     assert front.distance(shapely.Point(end)) >= ROAD_END_GAP - 0.05
+
+
+def test_posted_speed_limits_are_kept_where_asked() -> None:
+    """A ``MAX_SPEED`` sign of 11 m/s posted on the route's lanelet of a scenario whose
+    plan drives faster: with ``speed_limits`` no state is faster than the sign allows, and
+    the solution still passes the drivability checker; without it the sign is not read."""
+    from commonroad.scenario.traffic_sign import (
+        TrafficSign,
+        TrafficSignElement,
+        TrafficSignIDZamunda,
+    )
+
+    problem = cr.read(DATA / "ZAM_Urban-2_1.xml")
+    net = problem.scenario.lanelet_network
+    free = cr.plan(problem)
+    route = set(free.route.lanelets)
+    assert max(s.velocity for s in free.states) > 12.0
+    signs = [TrafficSignElement(TrafficSignIDZamunda.MAX_SPEED, [v]) for v in ("11.0", "16.0")]
+    net.add_traffic_sign(TrafficSign(problem.scenario.generate_object_id(), signs, route,
+                                     np.array(net.find_lanelet_by_id(min(route)).center_vertices[0])),
+                         route)
+    assert cr.posted_speed_limits(net) == dict.fromkeys(route, 11.0)
+    kept = cr.plan(problem, speed_limits=True)
+    assert max(s.velocity for s in kept.states) <= 11.0 + 1e-6
+    assert cr.certify(kept).passed
+    assert max(s.velocity for s in cr.plan(problem).states) > 12.0
