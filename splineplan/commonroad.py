@@ -1090,7 +1090,8 @@ class _Timing:
         coarse scan follow if that state misses the goal (its speed or orientation)."""
         limit = speed_limit(tr.s, tr.curvature, self.tp)
         if self.posted is not None:  # from the start's speed, braking to the limit
-            limit = np.minimum(limit, np.maximum(self.posted.at(tr.xy), self._braking(tr.s)))
+            posted = self.posted.at(tr.xy)
+            limit = np.minimum(limit, np.maximum(posted, self._braking(tr.s, float(posted[0]))))
         inside = self.goal.inside(tr.xy)
         highs = [v[1] for v in self.goal.speed if v is not None]
         if highs and inside.any():
@@ -1224,9 +1225,15 @@ class _Timing:
             return cand, (plan if self.moving else None)
         return None
 
-    def _braking(self, s: FloatArray) -> FloatArray:
-        """The speed [m/s] at stations ``s`` [m] braking at ``b_max`` from the start's."""
-        return np.sqrt(np.maximum(self.v0**2 - 2.0 * self.tp.b_max * s, 0.0))
+    def _braking(self, s: FloatArray, to: float | None = None) -> FloatArray:
+        """The speed [m/s] at stations ``s`` [m] braking at ``b_max`` from the start's;
+        with ``to`` [m/s], as hard as reaches that speed at the end of a time step (the
+        checker rebuilds each step with one acceleration)."""
+        b = self.tp.b_max
+        if to is not None and to < self.v0:
+            steps = math.ceil((self.v0 - to) / (b * self.dt) - 1e-9)
+            b = (self.v0 - to) / (steps * self.dt)
+        return np.sqrt(np.maximum(self.v0**2 - 2.0 * b * s, 0.0))
 
     def timed(self, tr: Trajectory, limit: FloatArray, cap: float, *, alone: bool = False
               ) -> tuple[Trajectory, Any]:

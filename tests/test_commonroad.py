@@ -329,10 +329,13 @@ def test_a_plan_that_misses_its_goal_stops_inside_the_road(
     assert front.distance(shapely.Point(end)) >= ROAD_END_GAP - 0.05
 
 
-def test_posted_speed_limits_are_kept_where_asked() -> None:
-    """A ``MAX_SPEED`` sign of 11 m/s posted on the route's lanelet of a scenario whose
-    plan drives faster: with ``speed_limits`` no state is faster than the sign allows, and
-    the solution still passes the drivability checker; without it the sign is not read."""
+@pytest.mark.parametrize("limit", [11.0, 8.0])
+def test_posted_speed_limits_are_kept_where_asked(limit: float) -> None:
+    """A ``MAX_SPEED`` sign posted on every lanelet of a scenario whose plan drives faster
+    (11 m/s; 8 m/s, below the start's 9.53 m/s, braked to within the first two of the
+    checker's steps of 0.25 s): with ``speed_limits`` no state after those is faster than
+    the sign allows, and the solution still passes the drivability checker; without it
+    the sign is not read."""
     from commonroad.scenario.traffic_sign import (
         TrafficSign,
         TrafficSignElement,
@@ -342,14 +345,15 @@ def test_posted_speed_limits_are_kept_where_asked() -> None:
     problem = cr.read(DATA / "ZAM_Urban-2_1.xml")
     net = problem.scenario.lanelet_network
     free = cr.plan(problem)
-    route = set(free.route.lanelets)
     assert max(s.velocity for s in free.states) > 12.0
-    signs = [TrafficSignElement(TrafficSignIDZamunda.MAX_SPEED, [v]) for v in ("11.0", "16.0")]
-    net.add_traffic_sign(TrafficSign(problem.scenario.generate_object_id(), signs, route,
-                                     np.array(net.find_lanelet_by_id(min(route)).center_vertices[0])),
-                         route)
-    assert cr.posted_speed_limits(net) == dict.fromkeys(route, 11.0)
+    every = {ll.lanelet_id for ll in net.lanelets}
+    signs = [TrafficSignElement(TrafficSignIDZamunda.MAX_SPEED, [v])
+             for v in (str(limit), "16.0")]
+    first = net.find_lanelet_by_id(free.route.lanelets[0]).center_vertices[0]
+    net.add_traffic_sign(TrafficSign(problem.scenario.generate_object_id(), signs, every,
+                                     np.array(first)), every)
+    assert cr.posted_speed_limits(net) == dict.fromkeys(every, limit)
     kept = cr.plan(problem, speed_limits=True)
-    assert max(s.velocity for s in kept.states) <= 11.0 + 1e-6
+    assert max(s.velocity for s in kept.states[2:]) <= limit + 1e-6
     assert cr.certify(kept).passed
     assert max(s.velocity for s in cr.plan(problem).states) > 12.0
