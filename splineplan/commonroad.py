@@ -54,8 +54,8 @@ from splineplan.errors import (
 from splineplan.geometry import FloatArray, dedupe_polyline, wrap_angle
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import RoadmapParams
-from splineplan.speed import speed_profile
-from splineplan.trajectory import Trajectory, TrajectoryParams, _times, speed_limit
+from splineplan.speed import allowed_speed, angle_rate_limit, speed_profile, towed_steering
+from splineplan.trajectory import Trajectory, TrajectoryParams, _times
 
 log = logging.getLogger(__name__)
 
@@ -803,7 +803,7 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     end_speed = 0.0 if road_ends else None
     t0 = float(init.time_step) * problem.dt
     timing = _Timing(tp, goal, v0, problem.dt, int(init.time_step), t0, end_speed, moving,
-                     car, posted)
+                     car, posted, head0)
     solver = _Solver(statics, centre0, head0, rp, tp, min(v0, tp.s_max), end_speed, car,
                      timing)
     try:
@@ -1075,6 +1075,7 @@ class _Timing:
     moving: list[Any]
     car: Vehicle
     posted: _Posted | None = None
+    body0: float | None = None
 
     def reaches(self, tr: Trajectory) -> bool:
         """Whether the timed trajectory reaches the goal."""
@@ -1088,7 +1089,7 @@ class _Timing:
         The cap is found by bisection so that the car is in the middle of the goal region
         (along its path) in the middle of the time window; a few caps around it and a
         coarse scan follow if that state misses the goal (its speed or orientation)."""
-        limit = speed_limit(tr.s, tr.curvature, self.tp)
+        limit = self.path_limit(tr)
         if self.posted is not None:  # from the start's speed, braking to the limit
             posted = self.posted.at(tr.xy)
             limit = np.minimum(limit, np.maximum(posted, self._braking(tr.s, float(posted[0]))))
@@ -1120,6 +1121,22 @@ class _Timing:
             if self.reaches(cand[0]):
                 return cand
         return self.meet(tr, limit) or first
+
+    def path_limit(self, tr: Trajectory) -> FloatArray:
+        """The path's speed limit ``(n,)`` [m/s]: the cornering speed (equation (1),
+        ``s_max``) and the steering rate's for the wheel angles that the car's towed rear
+        axle needs (:func:`~splineplan.speed.towed_steering`, from the body's orientation
+        ``body0`` at the start, else its steady slip there), as :func:`ks_states` drives
+        it: the checker's KS model asks no more of the steering."""
+        tp = self.tp
+        if self.body0 is not None:
+            slip0 = float(wrap_angle(float(tr.heading[0]) - self.body0))
+        else:
+            slip0 = math.asin(float(np.clip(tr.curvature[0] * tp.wheelbase / 2.0, -1.0, 1.0)))
+        wheel = towed_steering(tr.s, tr.curvature, wheelbase=tp.wheelbase, slip0=slip0)
+        return np.minimum(allowed_speed(tr.curvature, mu=tp.mu, g=tp.g, s_max=tp.s_max),
+                          angle_rate_limit(tr.s, wheel,
+                                           max_steering_rate=tp.max_steering_rate))
 
     def meet(self, tr: Trajectory, limit: FloatArray) -> tuple[Trajectory, Any] | None:
         """A speed profile that meets the goal where no cap does: slow (or stop) first,
@@ -1249,7 +1266,7 @@ class _Timing:
 
         return retime(replace(tr, speed=np.minimum(tr.speed, lim)), self.moving, self.tp,
                       t0=self.t0, length=self.car.length, width=self.car.width,
-                      margin=MOVING_MARGIN, end_speed=self.end_speed, v_limit=lim,
+                      margin=MOVING_MARGIN, end_speed=self.end_speed, path_limit=lim,
                       pass_from_behind=True)
 
 

@@ -544,15 +544,18 @@ def _plan_stations(t: FloatArray, s: FloatArray, times: FloatArray) -> FloatArra
 def retime(trajectory: Trajectory, moving: Sequence[MovingObstacle], params: TrajectoryParams,
            *, t0: float, length: float, width: float, margin: float,
            end_speed: float | None = None, v_limit: FloatArray | None = None,
-           pass_from_behind: bool = False) -> tuple[Trajectory, SpeedPlan]:
+           pass_from_behind: bool = False, path_limit: FloatArray | None = None
+           ) -> tuple[Trajectory, SpeedPlan]:
     """The same path with the speed of :func:`speed_among`, from the trajectory's start
     speed to at most ``end_speed`` (default: its own end speed). ``v_limit`` ``(n,)`` [m/s]
     at the trajectory's samples lowers the path's own speed limit (a cap that times the
     arrival at a goal). The result's times are from ``t0`` like the trajectory's own (from
     0); a wait is two samples at one station. ``pass_from_behind``: see
-    :func:`speed_among`."""
+    :func:`speed_among`. ``path_limit`` ``(n,)`` [m/s]: the path's own speed limit, where
+    it is known better than :func:`~splineplan.trajectory.speed_limit` of its curvature
+    (default)."""
     tr = trajectory
-    lim = speed_limit(tr.s, tr.curvature, params)
+    lim = speed_limit(tr.s, tr.curvature, params) if path_limit is None else path_limit
     if v_limit is not None:
         lim = np.minimum(lim, v_limit)
     plan = speed_among(tr.s, tr.xy, tr.heading, lim, t0=t0, v0=float(tr.speed[0]),

@@ -50,8 +50,17 @@ def steering_speed_limit(s: ArrayLike, kappa: ArrayLike, *, wheelbase: float,
     ``max_steering_rate * ds / |d|``; both its ends get that limit (``inf`` where the
     curvature does not change).
     """
+    return angle_rate_limit(s, steering_angle(kappa, wheelbase),
+                            max_steering_rate=max_steering_rate)
+
+
+def angle_rate_limit(s: ArrayLike, angle: ArrayLike, *, max_steering_rate: float
+                     ) -> FloatArray:
+    """Speed limit ``(n,)`` [m/s] at stations ``s`` ``(n,)`` [m] that lets the front wheels
+    take the angles ``angle`` ``(n,)`` [rad] there at most ``max_steering_rate`` [rad/s]
+    (see :func:`steering_speed_limit`)."""
     st = np.asarray(s, dtype=float)
-    turn = np.abs(np.diff(steering_angle(kappa, wheelbase)))
+    turn = np.abs(np.diff(np.asarray(angle, dtype=float)))
     with np.errstate(divide="ignore"):
         step = np.where(turn > 0, max_steering_rate * np.diff(st) / turn, np.inf)
     out = np.full(len(st), np.inf)
@@ -59,6 +68,36 @@ def steering_speed_limit(s: ArrayLike, kappa: ArrayLike, *, wheelbase: float,
         out[:-1] = step
         out[1:] = np.minimum(out[1:], step)
     return out
+
+
+def towed_steering(s: ArrayLike, kappa: ArrayLike, *, wheelbase: float, slip0: float
+                   ) -> FloatArray:
+    """Front-wheel angle ``(n,)`` [rad] at stations ``s`` ``(n,)`` [m] of a kinematic
+    single-track car whose centre, half the ``wheelbase`` [m] ahead of the rear axle,
+    follows the curvature ``kappa`` ``(n,)`` [1/m], with slip angle ``slip0`` [rad] (the
+    centre's direction against the body's) at the start.
+
+    The rear axle is towed without slipping sideways, so the slip angle ``beta`` obeys
+    ``d beta / ds = kappa - (2 / L) sin(beta)`` and the wheels stand at
+    ``tan(delta) = 2 tan(beta)``: they lag the path's curvature over about ``L / 2`` of
+    it, so a change of curvature asks less of the steering than
+    :func:`steering_angle`'s steady turn does. Each step relaxes ``beta`` exactly towards
+    the steady slip of the step's mean curvature."""
+    st = np.asarray(s, dtype=float)
+    k = np.asarray(kappa, dtype=float)
+    half = wheelbase / 2.0
+    beta = np.empty(len(st))
+    if len(st) == 0:
+        return beta
+    b = float(slip0)
+    beta[0] = b
+    km = 0.5 * (k[:-1] + k[1:])
+    steady = np.arcsin(np.clip(km * half, -1.0, 1.0))
+    decay = np.exp(-np.diff(st) * np.cos(steady) / half)
+    for j, (eq, f) in enumerate(zip(steady.tolist(), decay.tolist(), strict=True)):
+        b = eq + (b - eq) * f
+        beta[j + 1] = b
+    return np.asarray(np.arctan(2.0 * np.tan(beta)))
 
 
 def speed_profile(

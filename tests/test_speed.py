@@ -15,6 +15,7 @@ from splineplan.speed import (
     speed_profile,
     steering_speed_limit,
     times_from_profile,
+    towed_steering,
 )
 
 
@@ -98,6 +99,60 @@ def test_the_wheels_keep_up_with_the_curvature(seed: int, rate: float, v0: float
     inner = slice(102, 138)
     corner = allowed_speed(kappa[inner], mu=0.7, g=9.81, s_max=13.89)
     assert np.all(limit[inner] == corner)
+
+
+def _towed_by_ode(s: np.ndarray, kappa_of: object, wheelbase: float, slip0: float
+                  ) -> np.ndarray:
+    """The wheel angle of a kinematic single-track car whose centre follows the curve of
+    curvature ``kappa_of(s)``, integrated here in the plane: the rear axle, half the
+    wheelbase behind the centre, moves along the body (no sideways slip), so the body's
+    heading obeys ``theta' = sin(psi - theta) / (L / 2)`` per metre of the centre's path,
+    ``psi`` its direction; the wheels then stand at ``tan(delta) = L theta' / v_rear``."""
+    from scipy.integrate import solve_ivp
+
+    half = wheelbase / 2.0
+
+    def rhs(x: float, y: np.ndarray) -> list[float]:
+        psi, theta = y
+        return [float(kappa_of(x)), np.sin(psi - theta) / half]  # type: ignore[operator]
+
+    sol = solve_ivp(rhs, (s[0], s[-1]), [0.0, -slip0], t_eval=s, rtol=1e-10, atol=1e-12,
+                    max_step=0.05)
+    psi, theta = sol.y
+    beta = psi - theta
+    rate = np.sin(beta) / half  # body's turn per metre of the centre's path
+    return np.arctan(wheelbase * rate / np.cos(beta))
+
+
+@pytest.mark.parametrize("slip0", [0.0, 0.1])
+def test_the_towed_wheel_angle_is_the_single_track_cars(slip0: float) -> None:
+    """A curve whose curvature jumps from straight to a 6 m radius (between two samples
+    0.5 m apart), then eases along a ramp back to 0.05 1/m: the wheel angle of
+    :func:`towed_steering` agrees with the single-track car's integrated in the plane (an
+    ODE solver, its own formulation; the curvature linear between samples) within a
+    hundredth of a radian; at the jump the wheels lag the curvature over about half the
+    wheelbase, so the steering rate that they ask at a speed stays finite where the steady
+    turn's angle (:func:`~splineplan.speed.steering_angle`) jumps; on the arc they settle
+    at the steady angle."""
+    from splineplan.speed import steering_angle
+
+    wheelbase = 2.578
+
+    def kappa_of(x: np.ndarray | float) -> np.ndarray:
+        x = np.asarray(x, dtype=float)
+        return np.where(x < 10.0, 0.0, np.where(x < 30.0, 1.0 / 6.0,
+                                                np.maximum(1.0 / 6.0 - (x - 30.0) * 0.01,
+                                                           0.05)))
+
+    s = np.arange(0.0, 50.0 + 1e-9, 0.5)
+    kappa = kappa_of(s)
+    towed = towed_steering(s, kappa, wheelbase=wheelbase, slip0=slip0)
+    between = lambda x: np.interp(x, s, kappa)  # noqa: E731 - linear between samples
+    assert np.max(np.abs(towed - _towed_by_ode(s, between, wheelbase, slip0))) < 0.01
+    steady = steering_angle(kappa, wheelbase)
+    assert np.max(np.abs(np.diff(towed))) < 0.5 * np.max(np.abs(np.diff(steady)))
+    settled = (s > 25.0) & (s < 30.0)
+    assert np.allclose(towed[settled], steady[settled], atol=0.01)
 
 
 @settings(deadline=None)  # the first example compiles the loop
