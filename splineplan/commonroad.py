@@ -1257,14 +1257,13 @@ class _Timing:
         """The path with its speed under ``cap`` [m/s]; the cap applies from where braking
         from the start's speed reaches it. ``alone``: without the moving obstacles."""
         lim = np.minimum(limit, np.maximum(cap, self._braking(tr.s)))
+        v = speed_profile(tr.s, lim, a_max=self.tp.a_max, b_max=self.tp.b_max,
+                          start_speed=min(self.v0, float(lim[0])), end_speed=self.end_speed)
         if alone or not self.moving:
-            v = speed_profile(tr.s, lim, a_max=self.tp.a_max, b_max=self.tp.b_max,
-                              start_speed=min(self.v0, float(lim[0])),
-                              end_speed=self.end_speed)
             return replace(tr, speed=v, t=_times(tr.s, v)), None
         from splineplan.spacetime import retime
 
-        return retime(replace(tr, speed=np.minimum(tr.speed, lim)), self.moving, self.tp,
+        return retime(replace(tr, speed=v), self.moving, self.tp,
                       t0=self.t0, length=self.car.length, width=self.car.width,
                       margin=MOVING_MARGIN, end_speed=self.end_speed, path_limit=lim,
                       pass_from_behind=True)

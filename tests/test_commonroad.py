@@ -360,15 +360,18 @@ def test_posted_speed_limits_are_kept_where_asked(limit: float) -> None:
     assert max(s.velocity for s in cr.plan(problem).states) > 12.0
 
 
+@pytest.mark.parametrize("name", ["DEU_Muc-22_1_T-1", "DEU_Ffb-2_2_T-1"])
 def test_a_turn_is_taken_as_fast_as_the_single_track_cars_steering_allows(
-        archived: Callable[[str], cr.Problem]) -> None:
-    """DEU_Muc-22_1: the goal's window opens 19.4 s after the start, past two tight turns.
-    The wheels of CommonRoad's car (the rear axle towed behind the centre) lag the path's
-    curvature, so they turn more slowly than a steady turn at each point would ask: the
-    speed the steering rate allows is the towed wheels', and the car takes the turns fast
-    enough for the window (with the steady turn's limit it crawled through at 1.6 m/s and
-    came 3 s late). Certified, and the wheel angle of every state reached at the rate
-    (0.4 rad/s) the checker allows."""
-    res = cr.plan(archived("DEU_Muc-22_1_T-1"))
+        archived: Callable[[str], cr.Problem], name: str) -> None:
+    """The wheels of CommonRoad's car (the rear axle towed behind the centre) lag the
+    path's curvature, so they turn more slowly than a steady turn at each point would ask:
+    the speed the steering rate allows is the towed wheels'. ``DEU_Muc-22_1``: the goal's
+    window opens 19.4 s after the start, past two tight turns, which the car now takes
+    fast enough (with the steady turn's limit it crawled through at 1.6 m/s and came 3 s
+    late). ``DEU_Ffb-2_2``: the path starts into a curve that the steady turn's limit
+    entered below the start's speed (the start state was wrong, and the goal late).
+    Certified, and the wheel angle of every state reached at the rate (0.4 rad/s) the
+    checker allows."""
+    res = cr.plan(archived(name))
     assert cr.certify(res).passed
     assert _strictly_feasible(res)
