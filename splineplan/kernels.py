@@ -850,6 +850,26 @@ def box_gaps(c1: FloatArray, h1: FloatArray, l1: FloatArray, w1: FloatArray, c2:
 
 
 @njit(cache=True)
+def first_touch(c1: FloatArray, h1: FloatArray, l1: FloatArray, w1: FloatArray,
+                v1: FloatArray, c2: FloatArray, h2: FloatArray, l2: FloatArray,
+                w2: FloatArray, v2: FloatArray, taus: FloatArray
+                ) -> FloatArray:  # pragma: no cover - compiled
+    """For each pair of rectangles (as :func:`box_gaps`) moving at constant velocities
+    ``v1``, ``v2`` ``(N, 2)`` [m/s], the first of the times ``taus`` [s] (increasing) at
+    which they touch (:func:`box_gap_one` at most 0), ``inf`` where none is."""
+    n = len(h1)
+    out = np.full(n, np.inf)
+    for p in range(n):
+        for tau in taus:
+            if box_gap_one(c1[p, 0] + v1[p, 0] * tau, c1[p, 1] + v1[p, 1] * tau, h1[p], l1[p],
+                           w1[p], c2[p, 0] + v2[p, 0] * tau, c2[p, 1] + v2[p, 1] * tau,
+                           h2[p], l2[p], w2[p]) <= 0.0:
+                out[p] = tau
+                break
+    return out
+
+
+@njit(cache=True)
 def first_in_circles(xy: FloatArray, i0: int, box: FloatArray, cx: FloatArray,
                      cy: FloatArray, r: FloatArray) -> NDArray[np.int64]:  # pragma: no cover
     """For each circle (centre ``cx``, ``cy``, radius ``r`` ``(k,)`` [m]), the first path

@@ -25,7 +25,8 @@ from typing import Any
 import numpy as np
 from scipy.spatial import cKDTree
 
-from splineplan.geometry import heading_from_sumo_angle
+from splineplan import kernels
+from splineplan.geometry import heading_from_sumo_angle, kernel_floats
 from splineplan.spacetime import box_gap
 
 #: Longest time-to-collision [s] looked for, and its time step [s].
@@ -163,17 +164,11 @@ def _ttc(centre: np.ndarray, head: np.ndarray, speed: np.ndarray, size: np.ndarr
         return out
     ci, cj = i[cand], j[cand]
     taus = np.arange(TTC_STEP, TTC_HORIZON + TTC_STEP / 2, TTC_STEP)
-    nt, k = len(taus), len(cand)
-    # every pair at every tau at once: rows tau-major, (nt * k,)
-    shift_i = (vel[ci][None, :, :] * taus[:, None, None]).reshape(-1, 2)
-    shift_j = (vel[cj][None, :, :] * taus[:, None, None]).reshape(-1, 2)
-    rep = np.tile(np.arange(k), nt)
-    g = _gaps(centre[ci][rep] + shift_i, head[ci][rep], size[ci][rep],
-              centre[cj][rep] + shift_j, head[cj][rep], size[cj][rep]).reshape(nt, k)
-    hit = g <= 0.0
-    first = np.argmax(hit, axis=0)
-    touched = hit.any(axis=0)
-    out[cand[touched]] = taus[first[touched]]
+    out[cand] = kernels.first_touch(
+        kernel_floats(centre[ci]), kernel_floats(head[ci]), kernel_floats(size[ci, 0]),
+        kernel_floats(size[ci, 1]), kernel_floats(vel[ci]), kernel_floats(centre[cj]),
+        kernel_floats(head[cj]), kernel_floats(size[cj, 0]), kernel_floats(size[cj, 1]),
+        kernel_floats(vel[cj]), taus)
     return out
 
 
