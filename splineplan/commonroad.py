@@ -803,7 +803,7 @@ def plan(problem: Problem, *, vehicle_type: int = 2,
     end_speed = 0.0 if road_ends else None
     t0 = float(init.time_step) * problem.dt
     timing = _Timing(tp, goal, v0, problem.dt, int(init.time_step), t0, end_speed, moving,
-                     car, posted, head0)
+                     car, head0, posted)
     solver = _Solver(statics, centre0, head0, rp, tp, min(v0, tp.s_max), end_speed, car,
                      timing)
     try:
@@ -1074,8 +1074,8 @@ class _Timing:
     end_speed: float | None
     moving: list[Any]
     car: Vehicle
+    body0: float
     posted: _Posted | None = None
-    body0: float | None = None
 
     def reaches(self, tr: Trajectory) -> bool:
         """Whether the timed trajectory reaches the goal."""
@@ -1126,13 +1126,10 @@ class _Timing:
         """The path's speed limit ``(n,)`` [m/s]: the cornering speed (equation (1),
         ``s_max``) and the steering rate's for the wheel angles that the car's towed rear
         axle needs (:func:`~splineplan.speed.towed_steering`, from the body's orientation
-        ``body0`` at the start, else its steady slip there), as :func:`ks_states` drives
-        it: the checker's KS model asks no more of the steering."""
+        ``body0`` [rad] at the start), as :func:`ks_states` drives it: the checker's KS
+        model asks no more of the steering."""
         tp = self.tp
-        if self.body0 is not None:
-            slip0 = float(wrap_angle(float(tr.heading[0]) - self.body0))
-        else:
-            slip0 = math.asin(float(np.clip(tr.curvature[0] * tp.wheelbase / 2.0, -1.0, 1.0)))
+        slip0 = float(wrap_angle(float(tr.heading[0]) - self.body0))
         wheel = towed_steering(tr.s, tr.curvature, wheelbase=tp.wheelbase, slip0=slip0)
         return np.minimum(allowed_speed(tr.curvature, mu=tp.mu, g=tp.g, s_max=tp.s_max),
                           angle_rate_limit(tr.s, wheel,
