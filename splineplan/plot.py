@@ -1216,7 +1216,22 @@ def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: A
     moving
         Each moving obstacle's centre path ``(n, 2)`` [m] (thin grey lines, its start a dot).
     """
-    fig, ax = plt.subplots(figsize=(10, 6), layout="constrained")
+    xy = np.column_stack((trajectory.x, trajectory.y))
+    # framed on what the car drives, the goal and the static obstacles near them (not the
+    # whole route, which may run on for hundreds of metres)
+    pts = np.vstack([xy] + [np.asarray(p) for p in goal])
+    box_lo, box_hi = pts.min(axis=0) - FRAME_REACH, pts.max(axis=0) + FRAME_REACH
+    near = [p for p in (obstacles.polygons() if len(obstacles) else [])
+            if np.any(np.all((p >= box_lo) & (p <= box_hi), axis=1))]
+    pts = np.vstack([pts, *near])
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    pad = max(FRAME_PAD, 0.1 * float(np.max(hi - lo)))
+    lo, hi = lo - pad, hi + pad
+    # the figure shaped like the frame (a tall frame in a wide figure left it blank)
+    ratio = float((hi[1] - lo[1]) / max(hi[0] - lo[0], 1e-9))
+    size = ((10.0, float(np.clip(8.0 * ratio + 1.6, 4.5, 10.0))) if ratio <= 1.0
+            else (float(np.clip(8.5 / ratio + 2.6, 5.5, 10.0)), 9.5))
+    fig, ax = plt.subplots(figsize=size, layout="constrained")
     ax.add_collection(PolyCollection([np.asarray(p) for p in lanelets], facecolors="0.92",
                                      edgecolors="0.7", linewidths=0.5, zorder=1))
     if len(route):
@@ -1231,11 +1246,10 @@ def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: A
         ax.add_collection(PolyCollection(obstacles.polygons(), facecolors="0.35",
                                          edgecolors="k", zorder=3, label="static obstacles"))
     for k, m in enumerate(moving):
-        xy = np.asarray(m)
-        ax.plot(xy[:, 0], xy[:, 1], color="0.55", lw=0.8, zorder=2.5,
+        path_xy = np.asarray(m)
+        ax.plot(path_xy[:, 0], path_xy[:, 1], color="0.55", lw=0.8, zorder=2.5,
                 label="dynamic obstacles' paths" if k == 0 else None)
-        ax.plot(xy[:1, 0], xy[:1, 1], "o", color="0.55", ms=3, zorder=2.5)
-    xy = np.column_stack((trajectory.x, trajectory.y))
+        ax.plot(path_xy[:1, 0], path_xy[:1, 1], "o", color="0.55", ms=3, zorder=2.5)
     top = _speed_scale(s_max, trajectory.speed)
     ax.add_collection(_speed_line(xy, trajectory.speed, top, lw=2.0, gid="trajectory",
                                   zorder=5, label="trajectory (colour: speed)"))
@@ -1256,17 +1270,8 @@ def plot_commonroad(lanelets: Sequence[Any], obstacles: Obstacles, trajectory: A
                                          label="car every 0.5 s"))
     fig.colorbar(plt.cm.ScalarMappable(norm=Normalize(0.0, top), cmap=SPEED_CMAP), ax=ax,
                  label="speed [m/s]", shrink=0.8)
-    # framed on what the car drives, the goal and the static obstacles near them (not the
-    # whole route, which may run on for hundreds of metres)
-    pts = np.vstack([xy] + [np.asarray(p) for p in goal])
-    box_lo, box_hi = pts.min(axis=0) - FRAME_REACH, pts.max(axis=0) + FRAME_REACH
-    near = [p for p in (obstacles.polygons() if len(obstacles) else [])
-            if np.any(np.all((p >= box_lo) & (p <= box_hi), axis=1))]
-    pts = np.vstack([pts, *near])
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
-    pad = max(FRAME_PAD, 0.1 * float(np.max(hi - lo)))
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal", adjustable="box")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
