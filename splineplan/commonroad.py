@@ -54,8 +54,8 @@ from splineplan.errors import (
 from splineplan.geometry import FloatArray, dedupe_polyline, wrap_angle
 from splineplan.obstacles import Obstacles
 from splineplan.roadmap import RoadmapParams
-from splineplan.speed import allowed_speed, angle_rate_limit, speed_profile, towed_steering
-from splineplan.trajectory import Trajectory, TrajectoryParams, _times
+from splineplan.speed import speed_profile, steady_slip
+from splineplan.trajectory import Trajectory, TrajectoryParams, _times, speed_limit
 
 log = logging.getLogger(__name__)
 
@@ -1128,12 +1128,8 @@ class _Timing:
         axle needs (:func:`~splineplan.speed.towed_steering`, from the body's orientation
         ``body0`` [rad] at the start), as :func:`ks_states` drives it: the checker's KS
         model asks no more of the steering."""
-        tp = self.tp
-        slip0 = float(wrap_angle(float(tr.heading[0]) - self.body0))
-        wheel = towed_steering(tr.s, tr.curvature, wheelbase=tp.wheelbase, slip0=slip0)
-        return np.minimum(allowed_speed(tr.curvature, mu=tp.mu, g=tp.g, s_max=tp.s_max),
-                          angle_rate_limit(tr.s, wheel,
-                                           max_steering_rate=tp.max_steering_rate))
+        return speed_limit(tr.s, tr.curvature, self.tp,
+                           slip0=float(wrap_angle(float(tr.heading[0]) - self.body0)))
 
     def meet(self, tr: Trajectory, limit: FloatArray) -> tuple[Trajectory, Any] | None:
         """A speed profile that meets the goal where no cap does: slow (or stop) first,
@@ -1388,8 +1384,8 @@ def ks_states(tr: Trajectory, car: Vehicle, dt: float, step0: int = 0, *,
 
 def _slip(tr: Trajectory, car: Vehicle) -> float:
     """Slip angle [rad] of the centre's path against the body at the trajectory's start
-    (``sin beta = kappa L / 2``)."""
-    return math.asin(float(np.clip(tr.curvature[0] * car.wheelbase / 2.0, -1.0, 1.0)))
+    (:func:`~splineplan.speed.steady_slip`)."""
+    return steady_slip(float(tr.curvature[0]), car.wheelbase)
 
 
 def _tow(t: FloatArray, vx: FloatArray, vy: FloatArray, theta0: float, half: float

@@ -850,6 +850,32 @@ def box_gaps(c1: FloatArray, h1: FloatArray, l1: FloatArray, w1: FloatArray, c2:
 
 
 @njit(cache=True)
+def towed_slip(s: FloatArray, kappa: FloatArray, half: float, slip0: float
+               ) -> FloatArray:  # pragma: no cover - compiled
+    """Slip angle ``(n,)`` [rad] at stations ``s`` of a rear axle towed ``half`` [m]
+    behind a point that runs on curvature ``kappa`` (linear between samples):
+    ``d beta / ds = kappa - sin(beta) / half`` from ``slip0``, a step of the classical
+    Runge-Kutta method per sample (:func:`splineplan.speed.towed_steering`)."""
+    n = len(s)
+    beta = np.empty(n)
+    if n == 0:
+        return beta
+    b = slip0
+    beta[0] = b
+    for j in range(n - 1):
+        d = s[j + 1] - s[j]
+        k0, k1 = kappa[j], kappa[j + 1]
+        km = 0.5 * (k0 + k1)
+        a1 = k0 - np.sin(b) / half
+        a2 = km - np.sin(b + 0.5 * d * a1) / half
+        a3 = km - np.sin(b + 0.5 * d * a2) / half
+        a4 = k1 - np.sin(b + d * a3) / half
+        b += d * (a1 + 2.0 * a2 + 2.0 * a3 + a4) / 6.0
+        beta[j + 1] = b
+    return beta
+
+
+@njit(cache=True)
 def first_touch(c1: FloatArray, h1: FloatArray, l1: FloatArray, w1: FloatArray,
                 v1: FloatArray, c2: FloatArray, h2: FloatArray, l2: FloatArray,
                 w2: FloatArray, v2: FloatArray, taus: FloatArray

@@ -636,7 +636,7 @@ def plot_speed_profile(
     NaN where it exceeds 1.5 ``s_max``), ``steering_limit`` (likewise; where the params
     have the car's steering) and ``s_max``.
     """
-    from splineplan.speed import steering_speed_limit
+    from splineplan.speed import towed_speed_limit
 
     mu, g, s_max = (_param(params, k) for k in ("mu", "g", "s_max"))
     s = np.asarray(trajectory.s, dtype=float)
@@ -652,8 +652,8 @@ def plot_speed_profile(
     except (KeyError, AttributeError):  # a plan saved before the car's steering was kept
         pass
     else:
-        steer = steering_speed_limit(s, np.asarray(trajectory.curvature, dtype=float),
-                                     wheelbase=wheelbase, max_steering_rate=rate)
+        steer = towed_speed_limit(s, np.asarray(trajectory.curvature, dtype=float),
+                                  wheelbase=wheelbase, max_steering_rate=rate)
         steer = np.where(steer <= top, steer, np.nan)
     allowed = np.fmin(np.fmin(corner, steer), s_max)
     if ax is None:

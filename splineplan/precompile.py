@@ -64,6 +64,7 @@ SIGNATURES: dict[str, tuple[float, dict[str, tuple[tuple[Any, ...], ...]]]] = {
         "crosses": ((F2, F1, B1, F2, F1, f8, f8, f8, f8, f8, f8),),
         "box_gaps": ((F2, F1, F1, F1, F2, F1, F1, F1),),
         "first_touch": ((F2, F1, F1, F1, F2, F2, F1, F1, F1, F2, F1),),
+        "towed_slip": ((F1, F1, f8, f8),),
         "first_in_circles": ((F2, i8, F1, F1, F1, F1),),
         "blocked_samples": ((F2, F1, f8, f8, F2, F1, I1, f8, f8, f8, f8),),
     }),

@@ -3,20 +3,24 @@ braking limits.
 
 Beyond the paper (which only states the cornering speed, equation 1): where the curvature
 changes, the front wheels must turn, and a car turns them at a limited rate, so the speed
-is bounded there too (:func:`steering_speed_limit`); a forward pass bounds the speed by the
-acceleration limit, ``v_j^2 <= v_{j-1}^2 + 2 a_max ds``, and a backward pass by the braking
-limit, ``v_j^2 <= v_{j+1}^2 + 2 b_max ds``. Time follows from the speeds.
+is bounded there too (:func:`towed_speed_limit`: the wheels of a car whose rear axle is
+towed behind the curve; :func:`steering_speed_limit`: those of a steady turn); a forward
+pass bounds the speed by the acceleration limit, ``v_j^2 <= v_{j-1}^2 + 2 a_max ds``, and a
+backward pass by the braking limit, ``v_j^2 <= v_{j+1}^2 + 2 b_max ds``. Time follows from
+the speeds.
 """
 
 from __future__ import annotations
 
 import logging
+import math
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from splineplan import kernels
 from splineplan.errors import ParameterError
-from splineplan.geometry import FloatArray
+from splineplan.geometry import FloatArray, kernel_floats
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +74,13 @@ def angle_rate_limit(s: ArrayLike, angle: ArrayLike, *, max_steering_rate: float
     return out
 
 
+def steady_slip(kappa: float, wheelbase: float) -> float:
+    """Slip angle [rad] of the centre's path against the body in a steady turn of
+    curvature ``kappa`` [1/m] (``sin beta = kappa L / 2``, centre half the ``wheelbase``
+    [m] ahead of the rear axle)."""
+    return math.asin(min(max(kappa * wheelbase / 2.0, -1.0), 1.0))
+
+
 def towed_steering(s: ArrayLike, kappa: ArrayLike, *, wheelbase: float, slip0: float
                    ) -> FloatArray:
     """Front-wheel angle ``(n,)`` [rad] at stations ``s`` ``(n,)`` [m] of a kinematic
@@ -81,23 +92,25 @@ def towed_steering(s: ArrayLike, kappa: ArrayLike, *, wheelbase: float, slip0: f
     ``d beta / ds = kappa - (2 / L) sin(beta)`` and the wheels stand at
     ``tan(delta) = 2 tan(beta)``: they lag the path's curvature over about ``L / 2`` of
     it, so a change of curvature asks less of the steering than
-    :func:`steering_angle`'s steady turn does. Each step relaxes ``beta`` exactly towards
-    the steady slip of the step's mean curvature."""
-    st = np.asarray(s, dtype=float)
-    k = np.asarray(kappa, dtype=float)
-    half = wheelbase / 2.0
-    beta = np.empty(len(st))
-    if len(st) == 0:
-        return beta
-    b = float(slip0)
-    beta[0] = b
-    km = 0.5 * (k[:-1] + k[1:])
-    steady = np.arcsin(np.clip(km * half, -1.0, 1.0))
-    decay = np.exp(-np.diff(st) * np.cos(steady) / half)
-    for j, (eq, f) in enumerate(zip(steady.tolist(), decay.tolist(), strict=True)):
-        b = eq + (b - eq) * f
-        beta[j + 1] = b
+    :func:`steering_angle`'s steady turn does. The curvature runs linearly between samples
+    (:func:`splineplan.kernels.towed_slip` integrates it)."""
+    beta = kernels.towed_slip(kernel_floats(s), kernel_floats(kappa), wheelbase / 2.0,
+                              float(slip0))
     return np.asarray(np.arctan(2.0 * np.tan(beta)))
+
+
+def towed_speed_limit(s: ArrayLike, kappa: ArrayLike, *, wheelbase: float,
+                      max_steering_rate: float, slip0: float | None = None) -> FloatArray:
+    """Speed limit ``(n,)`` [m/s] at stations ``s`` ``(n,)`` [m] that lets the front wheels
+    take :func:`towed_steering`'s angles for the curvature ``kappa`` ``(n,)`` [1/m] at
+    most ``max_steering_rate`` [rad/s] (:func:`angle_rate_limit`), from the slip angle
+    ``slip0`` [rad] at the start (``None``: :func:`steady_slip` of the start's
+    curvature)."""
+    k = np.asarray(kappa, dtype=float)
+    if slip0 is None:
+        slip0 = steady_slip(float(k[0]), wheelbase) if len(k) else 0.0
+    return angle_rate_limit(s, towed_steering(s, k, wheelbase=wheelbase, slip0=slip0),
+                            max_steering_rate=max_steering_rate)
 
 
 def speed_profile(

@@ -117,8 +117,8 @@ from splineplan.roadmap import Roadmap, RoadmapParams
 from splineplan.speed import (
     allowed_speed,
     speed_profile,
-    steering_speed_limit,
     times_from_profile,
+    towed_speed_limit,
 )
 from splineplan.trajectory_params import TrajectoryParams
 
@@ -620,13 +620,17 @@ def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
             "clear_road": clear_road, "violations": _worst_of(violations + between)}
 
 
-def speed_limit(s: FloatArray, curvature: FloatArray, params: TrajectoryParams) -> FloatArray:
+def speed_limit(s: FloatArray, curvature: FloatArray, params: TrajectoryParams, *,
+                slip0: float | None = None) -> FloatArray:
     """Speed limit ``(n,)`` [m/s] along a curve sampled at arc lengths ``s`` [m]: the
-    cornering speed of equation (1), ``s_max``, and what the steering rate allows."""
+    cornering speed of equation (1), ``s_max``, and what the steering rate allows for the
+    wheel angles of the car whose rear axle is towed half the wheelbase behind the curve
+    (:func:`~splineplan.speed.towed_speed_limit`), from the slip angle ``slip0`` [rad] at
+    the start (``None``: the steady turn's at the start's curvature)."""
     return np.minimum(
         allowed_speed(curvature, mu=params.mu, g=params.g, s_max=params.s_max),
-        steering_speed_limit(s, curvature, wheelbase=params.wheelbase,
-                             max_steering_rate=params.max_steering_rate))
+        towed_speed_limit(s, curvature, wheelbase=params.wheelbase,
+                          max_steering_rate=params.max_steering_rate, slip0=slip0))
 
 
 def sample_violations(s: FloatArray, xy: FloatArray, curvature: FloatArray,

@@ -45,10 +45,13 @@ class TrajectoryParams:
     wheelbase, max_steering_rate
         The car as a kinematic single-track model: its wheelbase [m], with the centre
         half of it ahead of the rear axle, and how fast it turns its front wheels [rad/s].
-        Where the curvature changes, the speed profile slows so that the wheels keep up
-        (:func:`splineplan.speed.steering_speed_limit`). Defaults: a compact car (BMW 320i,
-        CommonRoad's vehicle type 2: 2.578 m, 0.4 rad/s). The largest steering angle
-        follows from ``min_turn_radius`` (:attr:`max_steering_angle`).
+        Where the curvature changes, the speed profile slows so that the wheels, behind
+        which the rear axle is towed, keep up (:func:`splineplan.speed.towed_speed_limit`;
+        level 3's smoothing aims at the steady turn's angles,
+        :func:`splineplan.speed.steering_speed_limit`, which ask more). Defaults: a
+        compact car (BMW 320i, CommonRoad's vehicle type 2: 2.578 m, 0.4 rad/s). The
+        largest steering angle follows from ``min_turn_radius``
+        (:attr:`max_steering_angle`).
     max_iterations
         Cap on the number of control-point moves tried.
     bend_rounds

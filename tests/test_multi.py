@@ -413,16 +413,21 @@ def test_planned_vehicle_gives_way_to_foes_sumo_does_not_report(
     """At the city's priority junction C0 a planned car ('p') turns left from D0C0, a
     minor link, as SUMO's car 'q' comes from RNC0, whose links have the right of way
     over it. ``getJunctionFoes`` reports no foe of the links from D0C0 (SUMO 1.28), so
-    the world finds them itself: p gives way, and q passes. Before, p drove on, and q
-    hit it or both stood in the junction for good."""
+    the world finds them itself: p gives way, and q passes (SUMO's FCD: q is out of the
+    junction before p enters it). Before, p drove on, and q hit it or both stood in the
+    junction for good."""
     sc, r = _p_and_q(tmp_path, ("D0C0 C0RN", p_pos), ("RNC0 C0B0", q_pos), 40.0)
     pairs = r.metrics["pairs"]
     assert pairs["collision_pairs_planned"] == []
     assert pairs["min_gap_planned"]["value"] >= sc.roadmap.safety_margin
     assert r.vehicles["p"].status == "arrived"
-    arrived = {t.get("id"): float(t.get("arrival"))
-               for t in ET.parse(tmp_path / "out" / "tripinfo.xml").iter("tripinfo")}
-    assert arrived["q"] < arrived["p"]  # q went first
+    inside: dict[str, list[float]] = {"p": [], "q": []}
+    for step in ET.parse(tmp_path / "out" / "fcd.xml").iter("timestep"):
+        for v in step.iter("vehicle"):
+            if v.get("lane", "").startswith(":C0_"):
+                inside[v.get("id", "")].append(float(step.get("time", "nan")))
+    assert inside["p"] and inside["q"]
+    assert max(inside["q"]) < min(inside["p"])  # q went first
 
 
 @pytest.mark.parametrize(("p_pos", "bus_pos"), [(80.0, 55.0), (85.0, 65.0), (95.0, 75.0)])

@@ -23,6 +23,7 @@ from conftest import NETS, ROOT
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LineString, Polygon
+from test_speed import towed_by_ode
 
 from splineplan.errors import (
     ScenarioError,
@@ -203,11 +204,24 @@ def _free_drive(network: Path, start: str, goal: str, out: Path) -> SimResult:
 
 
 def _driven(r: SimResult) -> dict[str, FloatArray]:
-    """The driven path's curvature and accelerations, from the run's trajectory.csv."""
+    """The driven path's times, centres, curvature and accelerations, from the run's
+    trajectory.csv."""
     with (r.out_dir / "trajectory.csv").open() as fh:
         rows = list(csv.DictReader(fh))
     return {k: np.array([float(row[k]) for row in rows])
-            for k in ("curvature", "a_lon", "a_lat")}
+            for k in ("t", "x", "y", "curvature", "a_lon", "a_lat")}
+
+
+def _driven_wheel_rate(d: dict[str, FloatArray], wheelbase: float) -> FloatArray:
+    """The rate [rad/s] at which the kinematic single-track car's front wheels turn on
+    the driven path (its rear axle towed half the wheelbase behind the centre, integrated
+    in the plane: :func:`test_speed.towed_by_ode`), per step where the car moved."""
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(np.diff(d["x"]), np.diff(d["y"])))))
+    moved = np.concatenate(([True], np.diff(s) > 1e-6))
+    s, t, kappa = s[moved], d["t"][moved], d["curvature"][moved]
+    slip0 = float(np.arcsin(np.clip(kappa[0] * wheelbase / 2.0, -1.0, 1.0)))
+    angle = towed_by_ode(s, lambda x: np.interp(x, s, kappa), wheelbase, slip0)
+    return np.abs(np.diff(angle)) / np.diff(t)
 
 
 @pytest.mark.parametrize(("start", "goal"), [("C3D3", "B1A1"), ("B2B1", "A3A2"),
@@ -227,6 +241,7 @@ def test_a_free_drive_never_brakes_harder_than_the_vehicle_may(tmp_path: Path, s
     assert d["a_lon"].min() >= -1.05 * tp.b_max
     assert np.abs(d["a_lat"]).max() <= 1.05 * tp.mu * tp.g
     assert np.abs(d["curvature"]).max() <= 1.02 / tp.min_turn_radius
+    assert _driven_wheel_rate(d, tp.wheelbase).max() <= 1.05 * tp.max_steering_rate
 
 
 def test_a_route_planned_feasibly_is_driven_within_the_turning_limit(tmp_path: Path
@@ -249,12 +264,12 @@ def test_a_route_planned_feasibly_is_driven_within_the_turning_limit(tmp_path: P
 
 
 def test_a_replan_too_late_in_a_bend_goes_on_from_the_current_plan(tmp_path: Path) -> None:
-    """The city, SRS to E3E2, alone: on D3E3, braking for the turn into E3E2 (tighter
-    than the car can take), each routine replan asked for harder braking than ``b_max``
-    and was put off until the plan ran out; the last one keeps the current plan up to
-    where it runs straightest and plans on from there (the replan says where), and the
-    driven path keeps the car's limits."""
-    r = _free_drive(NETS / "city.net.xml", "SRS", "E3E2", tmp_path)
+    """The city, E3D3 to G1F1, alone: before the turn from G2G1 into G1F1 (tighter than
+    the car can take), each routine replan bent beyond the turning limit and beyond the
+    current plan and was put off until the plan ran out; the last one keeps the current
+    plan up to where it runs straightest and plans on from there (the replan says
+    where), and the driven path keeps the car's limits."""
+    r = _free_drive(NETS / "city.net.xml", "E3D3", "G1F1", tmp_path)
     assert r.status == "arrived", r.reason
     joined = [p for p in r.replans if p.ok and "on from the plan" in p.detail]
     assert joined and all(p.reason == "horizon" for p in joined)

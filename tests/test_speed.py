@@ -101,7 +101,7 @@ def test_the_wheels_keep_up_with_the_curvature(seed: int, rate: float, v0: float
     assert np.all(limit[inner] == corner)
 
 
-def _towed_by_ode(s: np.ndarray, kappa_of: object, wheelbase: float, slip0: float
+def towed_by_ode(s: np.ndarray, kappa_of: object, wheelbase: float, slip0: float
                   ) -> np.ndarray:
     """The wheel angle of a kinematic single-track car whose centre follows the curve of
     curvature ``kappa_of(s)``, integrated here in the plane: the rear axle, half the
@@ -148,7 +148,7 @@ def test_the_towed_wheel_angle_is_the_single_track_cars(slip0: float) -> None:
     kappa = kappa_of(s)
     towed = towed_steering(s, kappa, wheelbase=wheelbase, slip0=slip0)
     between = lambda x: np.interp(x, s, kappa)  # noqa: E731 - linear between samples
-    assert np.max(np.abs(towed - _towed_by_ode(s, between, wheelbase, slip0))) < 0.01
+    assert np.max(np.abs(towed - towed_by_ode(s, between, wheelbase, slip0))) < 0.01
     steady = steering_angle(kappa, wheelbase)
     assert np.max(np.abs(np.diff(towed))) < 0.5 * np.max(np.abs(np.diff(steady)))
     settled = (s > 25.0) & (s < 30.0)

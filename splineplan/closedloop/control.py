@@ -121,14 +121,16 @@ class Control(Perception):
         end = float(self.path_s[-1])
         # stop at the trajectory's end unless a new plan comes first
         v_cap = min(v_cap, math.sqrt(max(2.0 * tp.b_max * (end - self.u), 0.0)))
-        v_target = min(v_plan, v_cap)
         if self.stop_at is not None and not self.why_slow:
             self._hold(f"stopping before a blockage ({self.reason})")
         if v_plan < v_cap and self.waiting_for:
             self._hold(f"waiting for the published plan of {self._waited_for()}",
                        *self.waiting_for)
+        # the plan's own profile is followed braking at b_max at most (a new plan may start
+        # a little below the vehicle's speed); what comes into its way, at the emergency rate
         emergency = EMERGENCY_FACTOR * tp.b_max
-        v_new = min(max(v_target, self.v - emergency * dt), self.v + tp.a_max * dt)
+        v_new = min(max(v_plan, self.v - tp.b_max * dt), max(v_cap, self.v - emergency * dt),
+                    self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
         u = min(self.u + 0.5 * (self.v + v_new) * dt, end)
         if u >= end:
