@@ -615,6 +615,9 @@ class _BendProblem:
         unit (:data:`_BEND_KAPPA_UNIT`, :data:`_BEND_MOVE_UNIT`), and its gradient (the
         curvature's derivatives in closed form)."""
         kappa, _, _, d1, d2 = self.evaluate(x)
+        # a sample where the curve stops (its control points meet) bends without limit:
+        # as sharply as the largest finite curvature, so that the moves stay numbers
+        kappa = np.clip(kappa, -_BEND_KAPPA_CAP, _BEND_KAPPA_CAP)
         over = np.maximum(np.abs(kappa) - self.target, 0.0) / _BEND_KAPPA_UNIT
         sp2 = np.maximum((d1 * d1).sum(axis=1), 1e-12)
         sp3 = sp2 ** 1.5
@@ -651,3 +654,5 @@ class _BendProblem:
 #: objective 100 times larger or smaller) measured best.
 _BEND_KAPPA_UNIT = 0.01
 _BEND_MOVE_UNIT = 10.0
+#: Curvature [1/m] that the bends' easing takes for a sample where the curve stops.
+_BEND_KAPPA_CAP = 1e3

@@ -99,6 +99,7 @@ class DriverState:
     _bodies_after: dict[str, Any]  # id -> (bodies.BodyPath, lane index, lane id) after
     _pl: tuple[list[float], ...]
     _pl_np: tuple[FloatArray, FloatArray]
+    _corner_reach: list[float]
     _times_key: tuple[float, float] | None
     _times: tuple[int, list[float], list[float]]
     _full: tuple[list[float], ...]

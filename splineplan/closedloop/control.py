@@ -127,10 +127,14 @@ class Control(Perception):
             self._hold(f"waiting for the published plan of {self._waited_for()}",
                        *self.waiting_for)
         # the plan's own profile is followed braking at b_max at most (a new plan may start
-        # a little below the vehicle's speed); what comes into its way, at the emergency rate
+        # below the vehicle's speed where its curve asks the steering to turn sooner) while
+        # that keeps the cornering speed of its curve ahead; beyond, and for what comes into
+        # its way, at the emergency rate
         emergency = EMERGENCY_FACTOR * tp.b_max
-        v_new = min(max(v_plan, self.v - tp.b_max * dt), max(v_cap, self.v - emergency * dt),
-                    self.v + tp.a_max * dt)
+        gentle = max(v_plan, self.v - tp.b_max * dt)
+        if gentle * gentle > _interp(u_next, ps, self._corner_reach):
+            gentle = max(v_plan, self.v - emergency * dt)
+        v_new = min(gentle, max(v_cap, self.v - emergency * dt), self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
         u = min(self.u + 0.5 * (self.v + v_new) * dt, end)
         if u >= end:

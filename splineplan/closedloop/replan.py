@@ -68,7 +68,7 @@ _STANDS = 0.05
 #: plan. Not for a vehicle that keeps to its lane among SUMO's traffic: there the plans
 #: put off cost arrivals (city, 25 % planned, seeds 1 and 3: 30 and 20 arrived in 300 s
 #: against 46 and 28).
-BRAKE_SLACK = 1.0
+BRAKE_SLACK = 0.05
 #: Least distance [m] from the vehicle, and from the current plan's end, of the point where
 #: the last try of a routine replan that is still worse goes on from the current plan.
 JOIN_AHEAD = 5.0
@@ -147,6 +147,7 @@ class _Cut:
     y: FloatArray
     heading: FloatArray
     speed: FloatArray
+    curvature: FloatArray
 
 
 class Replanning(Perception):
@@ -393,9 +394,11 @@ class Replanning(Perception):
             return False, _PutOff(why)
         if why is not None and usable is None:
             # the last chance for a routine replan: go on along the current plan to where it
-            # runs straightest, and on from there (as the corridor's segments join)
+            # runs straightest, and on from there (as the corridor's segments join), where
+            # that is no worse: no sharper bend, no harder braking
             joined = self._continued(obstacles, everything)
-            if joined is not None and self._worse(joined[1]) is None:
+            if joined is not None and _rank(self._shortfall(joined[1])) <= _rank(
+                    self._shortfall(traj)):
                 roadmaps, traj, window, s1, self.joined_at = joined
         final = s1 >= self.corridor.length - 1e-6
         if self.board:
@@ -470,15 +473,24 @@ class Replanning(Perception):
         """Why a routine replan's ``traj`` is not taken, or ``None``: it would make the
         vehicle brake harder than ``b_max`` (:data:`BRAKE_SLACK`), or it bends beyond the
         turning limit and beyond what is left of the current plan."""
+        bend, short, i = self._shortfall(traj)
+        if short > BRAKE_SLACK:
+            return (f"put off: its curve asks for {float(traj.speed[i]):.1f} m/s "
+                    f"{float(traj.s[i]):.1f} m ahead, the vehicle drives at {self.v:.1f} m/s")
+        return bend
+
+    def _shortfall(self, traj: Any) -> tuple[str | None, float, int]:
+        """How a replan's ``traj`` falls short of the current plan: why it bends beyond the
+        turning limit and beyond what is left of the current plan (``None`` where it does
+        not), the most [m/s] by which its speed falls below what braking at ``b_max`` from
+        the vehicle's speed allows, and the sample where it does."""
         tp = self.sc.trajectory
         sv = np.asarray(traj.speed, dtype=float)
         brake = np.sqrt(np.maximum(self.v**2 - 2.0 * tp.b_max * np.asarray(traj.s, dtype=float),
                                    0.0))
         i = int(np.argmax(brake - sv))
-        if brake[i] - sv[i] > BRAKE_SLACK:
-            return (f"put off: its curve asks for {float(sv[i]):.1f} m/s "
-                    f"{float(traj.s[i]):.1f} m ahead, the vehicle drives at {self.v:.1f} m/s")
-        return _sharper_bend(traj, self.traj, self.u, tp.kappa_max)
+        return (_sharper_bend(traj, self.traj, self.u, tp.kappa_max),
+                float(brake[i] - sv[i]), i)
 
     def _continued(self, obstacles: Obstacles, everything: Obstacles
                    ) -> tuple[Any, Any, Corridor, float, float] | None:
@@ -639,7 +651,8 @@ class Replanning(Perception):
         if usable is not None:  # cut the trajectory: the ego stops at its new end
             cut = max(int(np.searchsorted(s, usable)), 2)
             traj = _Cut(s[:cut], np.asarray(traj.x)[:cut], np.asarray(traj.y)[:cut],
-                        np.asarray(traj.heading)[:cut], np.asarray(traj.speed)[:cut])
+                        np.asarray(traj.heading)[:cut], np.asarray(traj.speed)[:cut],
+                        np.asarray(traj.curvature)[:cut])
             s = traj.s
         n = max(math.ceil(s[-1] / _PATH_SPACING), 1) + 1
         u = np.linspace(0.0, s[-1], n)
@@ -677,6 +690,8 @@ class Replanning(Perception):
         self._reach = {}  # the lane reaches of the new path (Control._lane_reach)
         self._pl = (u.tolist(), self.path_xy[:, 0].tolist(), self.path_xy[:, 1].tolist(),
                     self.path_heading.tolist(), (self.path_speed**2).tolist())
+        self._corner_reach = _corner_reach(u, np.interp(u, s, traj.curvature),
+                                           self.sc.trajectory).tolist()
         self._full = (self.full_s.tolist(), self.full_xy[:, 0].tolist(),
                       self.full_xy[:, 1].tolist(), self.full_heading.tolist())
         self.traj = traj
@@ -780,6 +795,23 @@ class Replanning(Perception):
         # station on the route -> on the trajectory: offset by where the ego is on both
         margin = self.sc.ego.length + 2.0 * self.sc.roadmap.d + 2.0
         self.stop_at = max(self.u + (st - self.station) - margin, self.u)
+
+
+def _rank(shortfall: tuple[str | None, float, int]) -> tuple[bool, float]:
+    """A replan's :meth:`Replanning._shortfall` to compare with another's: a bend beyond
+    the limit first, then the braking beyond ``b_max`` (within :data:`BRAKE_SLACK`, none)."""
+    bend, short, _ = shortfall
+    return bend is not None, max(short - BRAKE_SLACK, 0.0)
+
+
+def _corner_reach(s: FloatArray, curvature: FloatArray, tp: TrajectoryParams) -> FloatArray:
+    """Per station of ``s`` [m] on a curve of ``curvature`` [1/m], the highest speed
+    squared [m^2/s^2] from which braking at ``b_max`` keeps the cornering speed of
+    equation (1) everywhere ahead (a huge number on a straight to the end)."""
+    k = np.abs(np.asarray(curvature, dtype=float))
+    corner2 = tp.mu * tp.g / np.maximum(k, 1e-12)
+    ramp = 2.0 * tp.b_max * np.asarray(s, dtype=float)
+    return np.asarray(np.minimum.accumulate((corner2 + ramp)[::-1])[::-1] - ramp)
 
 
 def _go_time(traj: Any, now: float) -> float:
