@@ -224,6 +224,29 @@ def _driven_wheel_rate(d: dict[str, FloatArray], wheelbase: float) -> FloatArray
     return np.abs(np.diff(angle)) / np.diff(t)
 
 
+@settings(max_examples=50, deadline=None)
+@given(radius=st.floats(4.2, 200.0), f=st.floats(0.0, 1.0), turn=st.sampled_from([-1, 1]))
+def test_the_vehicle_is_put_on_the_plans_curve_between_its_samples(radius: float, f: float,
+                                                                   turn: int) -> None:
+    """Between two path samples 0.5 m apart on an arc (positions and headings), the point
+    where the loop puts the vehicle lies on the arc to within a hundredth of the chord's
+    sagitta (the chord itself: up to the sagitta inside it, a millimetre on a 30 m
+    radius), and at the samples themselves exactly."""
+    from splineplan.closedloop.control import _on_curve
+
+    step = 0.5
+    s = [0.0, step]
+    ang = [turn * (-math.pi / 2.0 + k / radius) for k in s]
+    x = [radius * math.cos(a) for a in ang]
+    y = [turn * radius + radius * math.sin(a) for a in ang]
+    h = [turn * k / radius for k in s]
+    px, py = _on_curve(0, f, s, x, y, h)
+    sagitta = radius * (1.0 - math.cos(step / (2.0 * radius)))
+    assert abs(math.hypot(px, py - turn * radius) - radius) <= 0.01 * sagitta + 1e-12
+    assert _on_curve(0, 0.0, s, x, y, h) == pytest.approx((x[0], y[0]), abs=1e-12)
+    assert _on_curve(0, 1.0, s, x, y, h) == pytest.approx((x[1], y[1]), abs=1e-12)
+
+
 @pytest.mark.parametrize(("start", "goal"), [("C3D3", "B1A1"), ("B2B1", "A3A2"),
                                              ("B2C2", "D0D1")])
 def test_a_free_drive_never_brakes_harder_than_the_vehicle_may(tmp_path: Path, start: str,

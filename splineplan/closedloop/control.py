@@ -144,8 +144,7 @@ class Control(Perception):
         self.held_by = ((self.why_slow or "coming to the end of its plan")
                         if v_cap < v_plan or self.waiting_for else "")
         j, f = _locate(u, ps)
-        x = px[j] + f * (px[j + 1] - px[j])
-        y = py[j] + f * (py[j + 1] - py[j])
+        x, y = _on_curve(j, f, ps, px, py, ph)
         h = ph[j] + f * (ph[j + 1] - ph[j])
         self.pose = np.array([x, y, h])
         del ego
@@ -863,6 +862,23 @@ class Control(Perception):
         self._times_key = key
         self._times = (i0, vn.tolist(), tcum.tolist())
         return self._times
+
+
+def _on_curve(j: int, f: float, s: list[float], x: list[float], y: list[float],
+              h: list[float]) -> tuple[float, float]:
+    """The point at fraction ``f`` of the step from path sample ``j`` to the next (stations
+    ``s``, positions ``x``, ``y`` [m], headings ``h`` [rad]) on the cubic that leaves and
+    reaches them along their headings (Hermite): on the plan's curve to within a fraction
+    of a millimetre, where the chord between the samples would put the vehicle up to the
+    step's sagitta inside a bend and bend its path at every sample (a path measured over
+    a metre would turn 6 % sharper than the plan in a 7 m bend)."""
+    span = s[j + 1] - s[j]
+    f2, f3 = f * f, f * f * f
+    a, b = 2.0 * f3 - 3.0 * f2 + 1.0, span * (f3 - 2.0 * f2 + f)
+    c, d = 1.0 - a, span * (f3 - f2)
+    c0, s0, c1, s1 = math.cos(h[j]), math.sin(h[j]), math.cos(h[j + 1]), math.sin(h[j + 1])
+    return (a * x[j] + b * c0 + c * x[j + 1] + d * c1,
+            a * y[j] + b * s0 + c * y[j + 1] + d * s1)
 
 
 def _reach_time(dist: float, speed: float, accel: float) -> float:
