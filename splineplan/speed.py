@@ -33,6 +33,32 @@ def allowed_speed(kappa: ArrayLike, *, mu: float, g: float, s_max: float) -> Flo
     return np.asarray(np.minimum(v, s_max))
 
 
+def nearby_curvature(s: ArrayLike, kappa: ArrayLike, reach: float) -> FloatArray:
+    """The largest ``|kappa|`` [1/m] within ``reach`` [m] of each station of ``s`` ``(n,)``
+    [m] (increasing)."""
+    st = np.asarray(s, dtype=float)
+    k = np.abs(np.asarray(kappa, dtype=float))
+    lo = np.searchsorted(st, st - reach, side="left")
+    hi = np.searchsorted(st, st + reach, side="right")
+    if len(k) == 0:
+        return k
+    # a sparse table of maxima over windows of 2^j samples answers each [lo, hi) at once
+    table = [k]
+    width = 1
+    while 2 * width <= len(k):
+        prev = table[-1]
+        table.append(np.maximum(prev[:-width], prev[width:]))
+        width *= 2
+    n = hi - lo
+    level = np.floor(np.log2(np.maximum(n, 1))).astype(int)
+    out = np.empty(len(k))
+    for j in np.unique(level):
+        m = level == j
+        w = 1 << int(j)
+        out[m] = np.maximum(table[j][lo[m]], table[j][hi[m] - w])
+    return out
+
+
 def steering_angle(kappa: ArrayLike, wheelbase: float) -> FloatArray:
     """Front-wheel angle [rad] of a kinematic single-track car whose centre, half the
     ``wheelbase`` [m] ahead of the rear axle, runs on curvature ``kappa`` [1/m]: the rear

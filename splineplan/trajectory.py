@@ -116,6 +116,7 @@ from splineplan.optimiser import _Curve, _Optimiser, _refine
 from splineplan.roadmap import Roadmap, RoadmapParams
 from splineplan.speed import (
     allowed_speed,
+    nearby_curvature,
     speed_profile,
     times_from_profile,
     towed_speed_limit,
@@ -620,6 +621,13 @@ def _sample(spline: BSpline, curve: _Curve, opt: _Optimiser, checker: _Checker,
             "clear_road": clear_road, "violations": _worst_of(violations + between)}
 
 
+#: Reach [m] either side of a point within which the sharpest curvature sets its cornering
+#: speed (equation (1)): where a bend tightens, the path's curvature measured over a few
+#: metres (:func:`splineplan.metrics.path_curvature`) runs ahead of its value at the
+#: point, and a car driven at the point's cornering speed went up to 5 % beyond mu g.
+CORNER_REACH = 2.0
+
+
 def speed_limit(s: FloatArray, curvature: FloatArray, params: TrajectoryParams, *,
                 slip0: float | None = None) -> FloatArray:
     """Speed limit ``(n,)`` [m/s] along a curve sampled at arc lengths ``s`` [m]: the
@@ -628,7 +636,8 @@ def speed_limit(s: FloatArray, curvature: FloatArray, params: TrajectoryParams, 
     (:func:`~splineplan.speed.towed_speed_limit`), from the slip angle ``slip0`` [rad] at
     the start (``None``: the steady turn's at the start's curvature)."""
     return np.minimum(
-        allowed_speed(curvature, mu=params.mu, g=params.g, s_max=params.s_max),
+        allowed_speed(nearby_curvature(s, curvature, CORNER_REACH), mu=params.mu, g=params.g,
+                      s_max=params.s_max),
         towed_speed_limit(s, curvature, wheelbase=params.wheelbase,
                           max_steering_rate=params.max_steering_rate, slip0=slip0))
 
