@@ -12,11 +12,24 @@ from splineplan.speed import (
     allowed_speed,
     meeting_distances,
     meeting_profile,
+    nearby_curvature,
     speed_profile,
     steering_speed_limit,
     times_from_profile,
     towed_steering,
 )
+
+
+@settings(max_examples=60, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 300), reach=st.floats(0.0, 12.0))
+def test_the_sharpest_curvature_nearby_is_found(seed: int, n: int, reach: float) -> None:
+    """:func:`nearby_curvature` gives, at each station, the largest ``|kappa|`` of the
+    stations within ``reach`` of it (both ends included), as a plain scan finds it."""
+    rng = np.random.default_rng(seed)
+    s = np.cumsum(rng.uniform(0.05, 1.0, n))
+    kappa = rng.normal(0.0, 0.1, n)
+    want = [np.abs(kappa[(s >= x - reach) & (s <= x + reach)]).max() for x in s]
+    np.testing.assert_array_equal(nearby_curvature(s, kappa, reach), want)
 
 
 def test_allowed_speed_equation_1() -> None:
