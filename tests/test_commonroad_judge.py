@@ -71,7 +71,7 @@ def _with_steering(x: np.ndarray, x_sim: np.ndarray, vehicle_dynamics: object,
 
 
 
-@pytest.mark.parametrize("angle", [45.0, -60.0])
+@pytest.mark.parametrize("angle", [45.0, 60.0, -60.0])
 def test_lane_corners_are_drivable_by_commonroads_car(angle: float) -> None:
     """A bend of one 3.5 m lane, planned with the defaults (the BMW's steering rate)."""
     corridor, _ = kinked_lane(angle, 3.5)
@@ -91,10 +91,12 @@ def test_obstacle_fields_are_drivable_by_commonroads_car(seed: int) -> None:
 
 
 def test_the_judge_refuses_what_the_steering_rate_forbids() -> None:
-    """The same bend planned for a car that could turn its wheels at once: the curve is
-    the same, its speed through the bend's ends higher, and CommonRoad's car cannot
-    follow (the judge sees the steering rate)."""
-    corridor, _ = kinked_lane(45.0, 3.5)
+    """A 60 degree bend of the lane planned for a car that could turn its wheels at once:
+    its speed through the bend's ends is higher, and CommonRoad's car cannot follow (the
+    judge sees the steering rate; planned with the BMW's rate, the same bend passes
+    above). The 45 degree bend no longer tells: its curve's towed wheels turn slowly
+    enough at the speed that the cornering allows."""
+    corridor, _ = kinked_lane(60.0, 3.5)
     rm = plan_roadmap(corridor, Obstacles.empty(), np.array([0.0, 0.0]), RoadmapParams())
     instant = TrajectoryParams(max_steering_rate=100.0)
     tr = plan_trajectory(rm, corridor, Obstacles.empty(), instant, 0.0, start_speed=8.0)

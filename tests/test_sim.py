@@ -287,12 +287,13 @@ def test_a_route_planned_feasibly_is_driven_within_the_turning_limit(tmp_path: P
 
 
 def test_a_replan_too_late_in_a_bend_goes_on_from_the_current_plan(tmp_path: Path) -> None:
-    """The city, E3D3 to G1F1, alone: before the turn from G2G1 into G1F1 (tighter than
-    the car can take), each routine replan bent beyond the turning limit and beyond the
-    current plan and was put off until the plan ran out; the last one keeps the current
-    plan up to where it runs straightest and plans on from there (the replan says
-    where), and the driven path keeps the car's limits."""
-    r = _free_drive(NETS / "city.net.xml", "E3D3", "G1F1", tmp_path)
+    """The city, B1B2 to E3E2, alone: on D3E3, before the turn into E3E2 (tighter than
+    the car can take), routine replans bent beyond the turning limit and beyond the
+    current plan, or asked for harder braking than ``b_max``, and were put off until the
+    plan ran out; the last one keeps the current plan up to where it runs straightest
+    and plans on from there (the replan says where), and the driven path keeps the car's
+    limits."""
+    r = _free_drive(NETS / "city.net.xml", "B1B2", "E3E2", tmp_path)
     assert r.status == "arrived", r.reason
     joined = [p for p in r.replans if p.ok and "on from the plan" in p.detail]
     assert joined and all(p.reason == "horizon" for p in joined)

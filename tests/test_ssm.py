@@ -38,7 +38,7 @@ def test_crossing_sumo_ttc_agrees_with_ours(tmp_path: Path) -> None:
     definitions' geometry allows."""
     p = tmp_path / "cross.toml"
     p.write_text(f'network = "{NETS / "grid.net.xml"}"\n'
-                 '[[ego]]\nid = "a"\nstart_edge = "A1B1"\nstart_pos = 30.0\n'
+                 '[[ego]]\nid = "a"\nstart_edge = "A1B1"\nstart_pos = 35.0\n'
                  'goal_edge = "B1C1"\n'
                  '[[ego]]\nid = "b"\nstart_edge = "B0B1"\nstart_pos = 30.0\n'
                  'goal_edge = "B1B2"\n[sim]\nduration = 60\nseed = 1\n')
