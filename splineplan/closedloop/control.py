@@ -870,8 +870,7 @@ def _on_curve(j: int, f: float, s: list[float], x: list[float], y: list[float],
     ``s``, positions ``x``, ``y`` [m], headings ``h`` [rad]) on the cubic that leaves and
     reaches them along their headings (Hermite): on the plan's curve to within a fraction
     of a millimetre, where the chord between the samples would put the vehicle up to the
-    step's sagitta inside a bend and bend its path at every sample (a path measured over
-    a metre would turn 6 % sharper than the plan in a 7 m bend)."""
+    step's sagitta inside a bend and kink its path at every sample."""
     span = s[j + 1] - s[j]
     f2, f3 = f * f, f * f * f
     a, b = 2.0 * f3 - 3.0 * f2 + 1.0, span * (f3 - 2.0 * f2 + f)
