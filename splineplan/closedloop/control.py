@@ -79,6 +79,11 @@ ALLWAY_REACH = 3.0
 #: speed control brakes up to this hard when something comes into the ego's path (and SUMO's
 #: vehicle type of the ego has it as its ``emergencyDecel``).
 EMERGENCY_FACTOR = 2.0
+#: How far [m/s] a plan's speed may lie below what braking at ``b_max`` reaches for the
+#: speed control to follow it at ``b_max`` (a new plan starts that little below where its
+#: curve turns the wheels sooner than the last plan's did); a plan that drops further
+#: slows for something, and is followed at the emergency rate.
+PLAN_DROP = 0.25
 
 
 @dataclass(frozen=True)
@@ -126,13 +131,14 @@ class Control(Perception):
         if v_plan < v_cap and self.waiting_for:
             self._hold(f"waiting for the published plan of {self._waited_for()}",
                        *self.waiting_for)
-        # the plan's own profile is followed braking at b_max at most (a new plan may start
-        # below the vehicle's speed where its curve asks the steering to turn sooner) while
-        # that keeps the cornering speed of its curve ahead; beyond, and for what comes into
-        # its way, at the emergency rate
+        # a plan a little below what braking at b_max reaches (a new plan whose curve asks
+        # the steering to turn sooner) is followed braking at b_max while that keeps the
+        # cornering speed of its curve ahead; a plan that slows for something, and what
+        # comes into its way, at the emergency rate
         emergency = EMERGENCY_FACTOR * tp.b_max
         gentle = max(v_plan, self.v - tp.b_max * dt)
-        if gentle * gentle > _interp(u_next, ps, self._corner_reach):
+        if (gentle - v_plan > PLAN_DROP
+                or gentle * gentle > _interp(u_next, ps, self._corner_reach)):
             gentle = max(v_plan, self.v - emergency * dt)
         v_new = min(gentle, max(v_cap, self.v - emergency * dt), self.v + tp.a_max * dt)
         v_new = max(v_new, 0.0)
