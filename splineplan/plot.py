@@ -616,7 +616,9 @@ def plot_speed_profile(
     title: str | None = "Speed profile along the trajectory",
 ) -> Any:
     """Speed along the curve with its limits: cornering (equation 1), the steering rate
-    and ``s_max``.
+    and ``s_max``. The shaded allowed speed takes a point's cornering speed from the
+    sharpest curvature within :data:`~splineplan.trajectory.CORNER_REACH`, as the plan
+    does; the cornering line is equation (1) at the point itself.
 
     Parameters
     ----------
@@ -636,7 +638,8 @@ def plot_speed_profile(
     NaN where it exceeds 1.5 ``s_max``), ``steering_limit`` (likewise; where the params
     have the car's steering) and ``s_max``.
     """
-    from splineplan.speed import towed_speed_limit
+    from splineplan.speed import nearby_curvature, towed_speed_limit
+    from splineplan.trajectory import CORNER_REACH
 
     mu, g, s_max = (_param(params, k) for k in ("mu", "g", "s_max"))
     s = np.asarray(trajectory.s, dtype=float)
@@ -655,7 +658,11 @@ def plot_speed_profile(
         steer = towed_speed_limit(s, np.asarray(trajectory.curvature, dtype=float),
                                   wheelbase=wheelbase, max_steering_rate=rate)
         steer = np.where(steer <= top, steer, np.nan)
-    allowed = np.fmin(np.fmin(corner, steer), s_max)
+    # the plan takes a point's cornering speed from the sharpest curvature within
+    # CORNER_REACH of it: the allowed area does so too, the line shows equation (1) itself
+    with np.errstate(divide="ignore"):
+        corner_near = np.sqrt(mu * g / nearby_curvature(s, kappa, CORNER_REACH))
+    allowed = np.fmin(np.fmin(corner_near, steer), s_max)
     if ax is None:
         ax = Figure(figsize=(8.0, 3.5), layout="constrained").add_subplot()
     ax.fill_between(s, 0.0, np.nan_to_num(allowed, nan=s_max), color="#e3f2fd",

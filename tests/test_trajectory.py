@@ -272,7 +272,7 @@ def assert_wheels_keep_up(tr: Trajectory, params: TrajectoryParams = TP) -> None
     without slipping sideways) no faster than the steering rate: the car integrated in the
     plane along the curve (curvature linear between samples, the body in the steady turn
     of the start's curvature, as the speed tests write it), its wheel angle's change over
-    each step of the trajectory's times, to within the integration's 1 %."""
+    each step of the trajectory's times, to within the two integrations' 0.2 %."""
     s = np.asarray(tr.s, dtype=float)
     kappa = np.asarray(tr.curvature, dtype=float)
     slip0 = float(np.arcsin(np.clip(kappa[0] * params.wheelbase / 2.0, -1.0, 1.0)))
@@ -280,7 +280,7 @@ def assert_wheels_keep_up(tr: Trajectory, params: TrajectoryParams = TP) -> None
     dt = np.diff(tr.t)
     ok = np.isfinite(dt) & (dt > 0)
     rate = np.abs(np.diff(angle))[ok] / dt[ok]
-    assert rate.max(initial=0.0) <= params.max_steering_rate * 1.01
+    assert rate.max(initial=0.0) <= params.max_steering_rate * 1.002
 
 
 def assert_violations_say_why(tr: Trajectory, corridor: Corridor, obstacles: Obstacles,
