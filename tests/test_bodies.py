@@ -47,6 +47,28 @@ def test_a_body_on_a_turn_is_the_chord_between_its_back_and_front(radius: float,
     assert np.all(np.abs(off) < 0.02)
 
 
+@given(speed=st.floats(0.1, 10.0), accel=st.floats(0.5, 3.0), top=st.floats(0.0, 12.0))
+def test_a_body_speeding_up_covers_what_the_motion_law_says(speed: float, accel: float,
+                                                             top: float) -> None:
+    """A body inside a junction is predicted speeding up from ``speed`` at ``accel`` to
+    ``top`` (SUMO's drivers drive on out of a junction): along a straight lane its centre
+    covers v t + a t^2 / 2 until it is at ``top``, then ``top`` t on; at ``top`` below its
+    speed, it keeps its speed."""
+    line = np.array([[0.0, 0.0], [400.0, 0.0]])
+    path = body_path([(line, 400.0)])
+    t, centres, heads = bodies_along(path, 20.0, speed, 12.0, accel=accel, top=top,
+                                     horizon=8.0)
+    # the distance: the speed, min(v + a t, max(top, v)), summed over a fine grid
+    fine = np.linspace(0.0, t[-1], 80001)
+    v = np.minimum(speed + accel * fine, max(top, speed))
+    covered = np.concatenate(([0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(fine))))
+    want = np.interp(t, fine, covered)
+    assert np.allclose(centres[:, 0] - centres[0, 0], want, atol=1e-4)
+    assert np.allclose(centres[:, 1], 0.0) and np.allclose(heads, 0.0)
+    # never slower than at constant speed
+    assert np.all(np.diff(centres[:, 0]) >= speed * np.diff(t) - 1e-9)
+
+
 def test_a_long_body_sweeps_over_the_lane_beside_its_turn() -> None:
     """A 12 m bus turning on a 10 m radius lies 1.75 m inside its lane's centre line at
     its middle, over the lane beside the curve's inside: a car's path along that lane is

@@ -5,6 +5,7 @@ and bad input."""
 from __future__ import annotations
 
 import csv
+import functools
 import json
 import math
 import subprocess
@@ -17,7 +18,7 @@ import numpy as np
 import pytest
 import sumolib
 from conftest import NETS, ROOT
-from hypothesis import assume, given
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 from shapely.geometry import LineString, Polygon
 
@@ -387,19 +388,64 @@ def test_planned_vehicle_gives_way_to_a_bus_body_sweeping_through_a_turn(
     _p_keeps_off_bus(tmp_path, ("D0E0 E0E1", 60.0, "8"), ("E1E0 E0D0", car_pos), 25.0)
 
 
+@pytest.mark.parametrize(("p_pos", "q_pos"), [(60.0, 120.0), (50.0, 100.0), (80.0, 130.0)])
+def test_planned_vehicle_passes_a_car_waiting_with_its_front_in_its_way(
+        tmp_path: Path, p_pos: float, q_pos: float) -> None:
+    """At the city's junction E1 a planned car goes straight on (E0E1 -> E1E2) while
+    SUMO's car 'q' turns left off the bridge: q waits for it at its internal junction,
+    the end of its first junction lane, which puts its front 0.6 m into the planned car's
+    lane. The planned car stood behind that front for good (at five of six timings
+    tried, these three among them; in the city's traffic SUMO teleported such a car
+    after 300 s, and the junction jammed). Now a vehicle that has held it standing
+    inside a junction for 5 s, standing across its way itself, is an obstacle for level
+    2: the car plans round q's front and passes it with the margin."""
+    _p_arrives_clear(tmp_path, _routes(("q", "car", "bridge_west E1E0", q_pos, "max"),
+                                       ("p", "car", "E0E1 E1E2", p_pos, "max")), 40.0)
+
+
+@pytest.mark.parametrize(("bus_pos", "car_pos"), [(100.0, 30.0), (105.0, 30.0), (104.0, 35.0)])
+def test_planned_vehicle_and_a_bus_creeping_into_the_junction_do_not_wait_for_each_other(
+        tmp_path: Path, bus_pos: float, car_pos: float) -> None:
+    """At the city's priority junction C3 a planned car turns left from C2C3, a major
+    link, as a 12 m bus sets off straight across from B3C3, a minor one: SUMO's bus does
+    not see the car come and creeps into the junction, then waits for it there, while
+    the car gave way to the creeping body. Before, the car then stood in the bus's way or
+    short of it, and both stood for good (the car never arrived, at each of five
+    timings). Now a slow body is followed until it has left the junction, speeding up
+    as SUMO's drivers do there, and a bus that stands across the car's way is planned
+    round: at these three timings the car arrives, and their footprints keep half the
+    safety margin. (At the other two the bus stands with its front against the car's
+    path, and no curve of the car gets round it.)"""
+    _p_arrives_clear(tmp_path, _routes(("b", "bus", "B3C3 C3D3", bus_pos, "0"),
+                                       ("p", "car", "C2C3 C3B3", car_pos, "max",
+                                        'departLane="1"')), 40.0)
+
+
 def _p_keeps_off_bus(tmp_path: Path, bus: tuple[str, float, str], car: tuple[str, float],
                      duration: float) -> None:
     """A 12 m bus 'b' (route edges, depart position [m], depart speed) and the planned car
-    'p' (route edges, depart position [m]) on the city's network: p arrives, its footprint
-    never touches b's and keeps half the safety margin from it."""
-    routes = f"""<routes>
-<vType id="car" length="4.5" width="1.8" vClass="passenger"/>
-<vType id="bus" length="12" width="2.5" vClass="bus"/>
-<vehicle id="b" depart="0" departPos="{bus[1]:g}" departSpeed="{bus[2]}" type="bus">
-  <route edges="{bus[0]}"/></vehicle>
-<vehicle id="p" depart="0" departPos="{car[1]:g}" departSpeed="max" type="car">
-  <route edges="{car[0]}"/></vehicle>
-</routes>"""
+    'p' (route edges, depart position [m]) on the city's network:
+    :func:`_p_arrives_clear`."""
+    _p_arrives_clear(tmp_path, _routes(("b", "bus", bus[0], bus[1], bus[2]),
+                                       ("p", "car", car[0], car[1], "max")), duration)
+
+
+def _routes(*vehicles: tuple[str, ...] | tuple[Any, ...]) -> str:
+    """A route file's text: a 4.5 x 1.8 m car type ``car``, a 12 x 2.5 m bus type ``bus``,
+    and ``vehicles`` departing at 0 s, each (id, type, route edges, depart position [m],
+    depart speed, and any more attributes)."""
+    rows = "".join(
+        f'<vehicle id="{v[0]}" depart="0" departPos="{float(v[3]):g}" departSpeed="{v[4]}" '
+        f'type="{v[1]}" {" ".join(v[5:])}><route edges="{v[2]}"/></vehicle>\n'
+        for v in vehicles)
+    return ('<routes>\n<vType id="car" length="4.5" width="1.8" vClass="passenger"/>\n'
+            '<vType id="bus" length="12" width="2.5" vClass="bus"/>\n' + rows + "</routes>")
+
+
+def _p_arrives_clear(tmp_path: Path, routes: str, duration: float) -> None:
+    """SUMO's run of ``routes`` on the city's network with 'p' planned
+    (:func:`_p_among_sumo`): p arrives, its footprint never touches another's and keeps
+    half the safety margin from every other."""
     sc, r = _p_among_sumo(tmp_path, "city.net.xml", routes, duration)
     pairs = r.metrics["pairs"]
     assert pairs["collision_pairs_planned"] == []
@@ -644,6 +690,86 @@ def test_of_two_planned_cars_giving_way_to_each_other_one_goes_first(
     assert one_waits != two_waits
     if d_a != d_b:
         assert two_waits == (d_a < d_b)  # the nearer one goes first
+
+
+def _lane_view(pose: tuple[float, float, float] = (0.0, 0.0, 0.0), lane: str = "",
+               board: tuple[str, ...] = ()) -> Any:
+    """A stand-in for a planned car on the city's network (the real network, the car's
+    4.5 x 1.8 m size), its centre and heading at ``pose``, on SUMO's lane ``lane``, with
+    the published plans of ``board``: what the control's junction methods read."""
+    ego = type("Ego", (), {"length": 4.5, "width": 1.8})()
+    return type("View", (), {
+        "net": _city_network(),
+        "sc": type("Sc", (), {"ego": ego})(), "pose": np.array(pose), "last_lane": lane,
+        "board": dict.fromkeys(board), "_lane_band": Control._lane_band})()
+
+
+@functools.cache
+def _city_network() -> Any:
+    """The city's network, read once."""
+    from splineplan.network import load_network
+
+    return load_network(NETS / "city.net.xml")
+
+
+def _box(x: float, y: float, h: float, length: float = 4.5, width: float = 1.8) -> Polygon:
+    """The rectangle of a vehicle centred at ``x``, ``y`` [m], heading ``h`` [rad]."""
+    c, s_ = math.cos(h), math.sin(h)
+    a, b = length / 2.0, width / 2.0
+    return Polygon([(x + p * c - q * s_, y + p * s_ + q * c)
+                    for p, q in ((a, b), (-a, b), (-a, -b), (a, -b))])
+
+
+@settings(deadline=None)  # the first example reads the network
+@given(st.floats(6.0, 9.0), st.floats(-4.0, 4.0), st.floats(-math.pi, math.pi),
+       st.floats(1.8, 2.6))
+def test_a_footprint_over_a_foes_lane_is_in_its_way(station: float, offset: float,
+                                                     heading: float, width: float) -> None:
+    """A planned car that stands giving way at a junction but whose footprint already
+    reaches over the foe's lane (where a foe ``width`` [m] wide drives) is in its way:
+    it goes on to clear it rather than wait there to be hit (a bus ran into one that way).
+    ``Control._in_lane_way`` against shapely, on the city's straight lane through C1,
+    clear of the lane's ends."""
+    lane = ":C1_1_0"
+    view = _lane_view()
+    line = LineString(view.net.lane(lane).shape)
+    p = line.interpolate(station)
+    q = line.interpolate(station + 0.1)
+    h = math.atan2(q.y - p.y, q.x - p.x)
+    x, y = p.x - offset * math.sin(h), p.y + offset * math.cos(h)
+    view.pose = np.array([x, y, heading])
+    band = line.buffer(width / 2.0, cap_style="flat")
+    car = _box(x, y, heading)
+    gap, depth = car.distance(band), car.intersection(band).area
+    assume(gap > 1e-3 or depth > 1e-4)  # not on the edge's rounding
+    assert Control._in_lane_way(view, lane, width) == (gap <= 1e-3)
+
+
+def test_sumo_foes_outside_the_junction_wait_for_a_planned_car_in_it() -> None:
+    """A planned car that must give way but is in the junction already (on its only
+    internal lane) goes on where SUMO's foe is still outside it and can stop before the
+    conflict area: SUMO's drivers wait for vehicles in a junction, and two that waited
+    for each other stood for good. Not where the foe cannot stop, is on the junction's
+    lane already, or is another planned car (its plan times the meeting), nor before an
+    internal junction, where SUMO's drivers wait for foes that drive on."""
+    from splineplan.closedloop.control import FOE_DECEL
+
+    def waits(ego_lane: str, foe_in: float, speed: float, planned: bool = False) -> bool:
+        """Whether SUMO's car 'q' (left turn from the bridge at E1) waits for the ego."""
+        view = _lane_view(lane=ego_lane, board=("q",) if planned else ())
+        foe = JunctionFoe("q", 3.0, foe_in, 8.0, foe_in + 6.0, True, speed, 4.5,
+                          ":E1_3_0", 1.8)
+        return Control._foe_waits(view, foe)  # type: ignore[arg-type]
+
+    straight = ":E1_5_0"  # E0E1 -> E1E2, one internal lane
+    stop = math.sqrt(2.0 * FOE_DECEL * 30.0)  # the fastest that stops within 30 m
+    assert waits(straight, 30.0, 9.0)
+    assert waits(straight, 30.0, 0.0)
+    assert not waits(straight, 30.0, stop + 0.5)
+    assert not waits(straight, 3.0, 1.0)  # on the junction's lane (5.1 m) already
+    assert not waits(straight, 30.0, 9.0, planned=True)
+    assert not waits(":C1_2_0", 30.0, 9.0)  # before C1's internal junction
+    assert not waits("E0E1_0", 30.0, 9.0)  # not on a junction's lane at all
 
 
 def _standing_beside(gap: float, bend: float) -> tuple[bool, float, float]:

@@ -742,6 +742,7 @@ def test_the_place_where_a_footprint_reaches_a_foes_lane_is_shapelys(
     me = SimpleNamespace(net=net, sc=SimpleNamespace(ego=ego), u=u, full_s=s, full_xy=xy,
                          full_heading=np.full(len(s), h), _reach={})
     me._touching = lambda *a: Control._touching(me, *a)  # type: ignore[attr-defined]
+    me._lane_band = lambda *a: Control._lane_band(me, *a)  # type: ignore[attr-defined]
     got = Control._lane_reach(me, ":B0_1_0", 1.8)  # type: ignore[arg-type]
     dist = np.array([Polygon(footprint(p, h, 4.5, 1.8)).distance(centre) - 0.9 for p in xy])
     ahead = s >= u

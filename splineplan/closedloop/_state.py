@@ -88,6 +88,7 @@ class DriverState:
     trusted: dict[str, Any]  # id -> spacetime.MovingObstacle: plans the current one is timed among
     why_slow: str
     slowed_by: tuple[str, ...]
+    stand_since: float | None  # since when it stands (the deadlock watch) [s]
     released: dict[str, float]
     held_by: str
     wait_replan_at: float

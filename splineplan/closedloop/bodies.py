@@ -5,9 +5,10 @@ its length behind the front along its lanes, to its front. Through a junction tu
 body cuts across the inside of the curve (a 12 m bus on a turn of 10 m radius lies 1.75 m
 inside its lane's centre line at its middle), over lanes whose drivers SUMO lets go on
 (their connections are no foes). A planned vehicle sees the bus and gives way: it predicts
-the body at constant speed along the bus's lanes for a few seconds (:func:`body_path`,
-:func:`bodies_along`) and finds where and when that body meets its own path
-(:func:`meeting`, :func:`meetings` for several bodies at once).
+the body along the bus's lanes for a few seconds, a slow one until it has left the
+junction, at its speed, or speeding up where it is in the junction already
+(:func:`body_path`, :func:`bodies_along`), and finds where and when that body meets its own
+path (:func:`meeting`, :func:`meetings` for several bodies at once).
 """
 
 from __future__ import annotations
@@ -31,10 +32,17 @@ from splineplan.kernels import body_meetings
 LONG_VEHICLE = 7.0
 #: Prediction horizon [s] and step [s].
 HORIZON = 6.0
+#: The longest horizon [s] of a slow vehicle, followed until its body has left the
+#: junction.
+SLOW_HORIZON = 30.0
 STEP = 0.25
 #: A long vehicle slower than this [m/s] is standing: its body stays where it is (the
-#: time-gap control sees it there).
-MOVING = 0.5
+#: time-gap control sees it there). A bus creeping into a junction at 0.4 m/s is not.
+MOVING = 0.1
+#: A long vehicle inside a junction drives on out of it: its body is predicted speeding up
+#: at this rate [m/s²] (SUMO's default of a bus) to this speed [m/s].
+JUNCTION_ACCEL = 1.2
+JUNCTION_TOP = 8.0
 
 
 @dataclass(frozen=True)
@@ -82,14 +90,18 @@ def points_at(path: BodyPath, stations: FloatArray) -> tuple[FloatArray, FloatAr
 
 
 def bodies_along(path: BodyPath, at: float, speed: float, length: float, *,
-                 horizon: float = HORIZON, step: float = STEP
-                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+                 accel: float = 0.0, top: float = 0.0, horizon: float = HORIZON,
+                 step: float = STEP) -> tuple[FloatArray, FloatArray, FloatArray]:
     """The body of a vehicle of ``length`` [m] whose front is at station ``at`` [m] of
-    ``path``, driving on along it at ``speed`` [m/s]: times ``(k,)`` [s] from now, and its
-    centres ``(k, 2)`` [m] and headings ``(k,)`` [rad] then (the rectangle from its back to
-    its front, as SUMO draws it)."""
+    ``path``, driving on along it at ``speed`` [m/s] (speeding up at ``accel`` [m/s²] to
+    ``top`` [m/s] where that is faster): times ``(k,)`` [s] from now, and its centres
+    ``(k, 2)`` [m] and headings ``(k,)`` [rad] then (the rectangle from its back to its
+    front, as SUMO draws it)."""
     t = np.arange(0.0, horizon + 1e-9, step)
     front = at + speed * t
+    if accel > 0.0 and top > speed:
+        up = np.minimum(t, (top - speed) / accel)  # time spent speeding up
+        front += 0.5 * accel * up * up + accel * up * (t - up)
     pf, _ = points_at(path, front)
     pb, _ = points_at(path, front - length)
     d = pf - pb

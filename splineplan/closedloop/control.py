@@ -16,8 +16,11 @@ import numpy as np
 from splineplan import kernels
 from splineplan.closedloop.bodies import (
     HORIZON,
+    JUNCTION_ACCEL,
+    JUNCTION_TOP,
     LONG_VEHICLE,
     MOVING,
+    SLOW_HORIZON,
     BodyPath,
     bodies_along,
     body_path,
@@ -72,6 +75,9 @@ STOP_REACH = 2.0
 #: Acceleration [m/s²] at which a foe at an all-way stop may speed up (SUMO's default for
 #: passenger cars).
 FOE_ACCEL = 2.6
+#: How hard [m/s²] SUMO's drivers brake for a vehicle in a junction (SUMO's default of a
+#: bus; a car's is 4.5).
+FOE_DECEL = 4.0
 #: How far [m] beyond a junction's bounding circle a vehicle coming towards an all-way
 #: stop counts as coming.
 ALLWAY_REACH = 3.0
@@ -385,7 +391,8 @@ class Control(Perception):
         area, and before its footprint reaches the foe's body driving along its lane
         (:meth:`_lane_reach`; SUMO measures along the lanes' centre lines, and a turning
         car's front corner is in the foe's way earlier). Once it cannot stop before them,
-        it goes on: a car that stops inside a crossing blocks it. One that has crept within
+        or its footprint is in the foe's way already (:meth:`_in_lane_way`), it goes on: a
+        car that stops inside a crossing blocks it. One that has crept within
         :data:`YIELD_STOP` of the area stays there while it must give way: it is in the
         area only within :data:`YIELD_EDGE` of it. A foe standing still outside the area
         is waiting (for a light or another vehicle) and is no conflict, except at an
@@ -421,12 +428,36 @@ class Control(Perception):
             t_out = self._time_along_plan(ego_out + ego.length)
             if t_in - YIELD_GAP >= t_foe_out or t_foe_in >= t_out + YIELD_GAP:
                 continue
+            if self._in_lane_way(foe.foe_lane, foe.foe_width):
+                continue  # in the foe's way where it stands already: clear it
+            if inside and self._foe_waits(foe):
+                continue  # SUMO's driver waits for a vehicle in the junction
             c = self._stop_short(min(ego_in, self._lane_reach(foe.foe_lane, foe.foe_width)))
             if c < cap:
                 cap = c
                 self._hold(f"giving way at a junction to vehicle '{foe.id}', as SUMO's "
                            "right of way says", foe.id)
         return cap
+
+    def _foe_waits(self, foe: JunctionFoe) -> bool:
+        """Whether SUMO's driver of ``foe`` waits for the ego, which is in the junction
+        already: the foe is not yet on the junction's lane where they meet, and can stop
+        before the conflict area braking at :data:`FOE_DECEL`. SUMO's drivers give way to
+        the vehicles in a junction; an ego that stopped there to give way to them would
+        stand in their way for good. Not so before an internal junction (a lane of the
+        connection that another follows), where SUMO's drivers wait for the foes, and SUMO's
+        foes drive on."""
+        if foe.id in self.board:
+            return False  # another planned vehicle: its published plan times the meeting
+        c = self.net.connection_via(self.last_lane)
+        if c is None or c.via.index(self.last_lane) < len(c.via) - 1:
+            return False
+        try:
+            length = self.net.lane(foe.foe_lane).length
+        except SplineplanError:
+            return False
+        return (foe.foe_in > length
+                and foe.foe_speed * foe.foe_speed < 2.0 * FOE_DECEL * foe.foe_in)
 
     def _goes_first(self, foe: JunctionFoe) -> bool:
         """Whether ``foe``, another planned vehicle that the ego must give way to, standing
@@ -516,33 +547,61 @@ class Control(Perception):
         """Stations [m] of the path samples whose footprint comes within
         :data:`PATH_MARGIN` of the band ``width`` [m] wide along lane ``lane_id`` (none
         for a lane the network lacks)."""
-        try:
-            lane = self.net.lane(lane_id)
-        except SplineplanError:
+        band = self._lane_band(lane_id, width)
+        if band is None:
             return []
-        pts = np.asarray(lane.shape, dtype=float)
-        d = np.diff(pts, axis=0)
-        seg = np.hypot(d[:, 0], d[:, 1])
-        keep = seg > 1e-6
-        if not keep.any():
-            return []
-        mid, d, seg = ((pts[:-1] + pts[1:]) / 2.0)[keep], d[keep], seg[keep]
+        pts, mid, head, size = band
         ego = self.sc.ego
         # only the samples near the lane's bounding box can come near it
         reach = 0.5 * math.hypot(ego.length, ego.width) + 0.6 * width + PATH_MARGIN
         xy = self.full_xy
         close = np.flatnonzero(np.all(xy >= pts.min(axis=0) - reach, axis=1)
                                & np.all(xy <= pts.max(axis=0) + reach, axis=1))
-        n, m = len(close), len(seg)
+        n, m = len(close), len(head)
         if not n:
             return []
         i = np.repeat(close, m)
         j = np.tile(np.arange(m), n)
         gap = box_gap(xy[i], self.full_heading[i], (ego.length, ego.width),
-                      mid[j], np.arctan2(d[:, 1], d[:, 0])[j],
-                      (seg[j] + 0.1 * width, np.full(len(j), width)))
+                      mid[j], head[j], (size[0][j], size[1][j]))
         near = (gap.reshape(n, m) <= PATH_MARGIN).any(axis=1)
         return self.full_s[close[near]].tolist()
+
+    def _in_lane_way(self, lane_id: str, width: float) -> bool:
+        """Whether the footprint where the vehicle is overlaps the band ``width`` [m] wide
+        along lane ``lane_id``: a vehicle of that width driving along the lane would run
+        into it there."""
+        band = self._lane_band(lane_id, width)
+        if band is None:
+            return False
+        _, mid, head, size = band
+        ego = self.sc.ego
+        m = len(head)
+        gap = box_gap(np.repeat(self.pose[None, :2], m, axis=0), np.full(m, self.pose[2]),
+                      (ego.length, ego.width), mid, head, size)
+        return bool((gap <= 0.0).any())
+
+    def _lane_band(self, lane_id: str, width: float
+                   ) -> tuple[FloatArray, FloatArray, FloatArray,
+                              tuple[FloatArray, FloatArray]] | None:
+        """The band ``width`` [m] wide along lane ``lane_id`` as rectangles, one per piece of
+        its centre line: the lane's points, the pieces' centres, headings and (length,
+        width); ``None`` for a lane the network lacks, or unknown width."""
+        if not lane_id or width <= 0.0:
+            return None
+        try:
+            lane = self.net.lane(lane_id)
+        except SplineplanError:
+            return None
+        pts = np.asarray(lane.shape, dtype=float)
+        d = np.diff(pts, axis=0)
+        seg = np.hypot(d[:, 0], d[:, 1])
+        keep = seg > 1e-6
+        if not keep.any():
+            return None
+        mid, d, seg = ((pts[:-1] + pts[1:]) / 2.0)[keep], d[keep], seg[keep]
+        return (pts, mid, np.arctan2(d[:, 1], d[:, 0]),
+                (seg + 0.1 * width, np.full(len(seg), width)))
 
     def _body_speed(self, cap: float) -> float:
         """Speed cap [m/s] that keeps the ego's footprint, swinging round its path's
@@ -774,7 +833,9 @@ class Control(Perception):
         """The predicted body (:func:`~.bodies.bodies_along`) of a moving long vehicle of
         ``length`` [m] at ``place``, ``None`` where it approaches no junction or does not
         reach it within :data:`~.bodies.HORIZON`, and where its front has left the last
-        junction and its body has too. Kept for the step (planned vehicles of one run
+        junction and its body has too. Predicted for that horizon, or until the body has
+        left the junction where that takes longer (at most :data:`~.bodies.SLOW_HORIZON`).
+        Kept for the step (planned vehicles of one run
         share it: the run clears it each step)."""
         key = (place, length)
         if key in self._bodies_now:
@@ -794,7 +855,14 @@ class Control(Perception):
             lanes, index = known
             at = lanes.station(index, place.pos)
             if index > 0 or at + place.speed * HORIZON >= float(lanes.starts[1]):
-                found = bodies_along(lanes, at, place.speed, length)
+                # a slow one is followed until its body has left the junction: a car that
+                # stands just beyond a shorter prediction stands in its way
+                clear = float(lanes.starts[-1]) + length - at
+                inside = place.lane.startswith(":")
+                found = bodies_along(lanes, at, place.speed, length,
+                                     accel=JUNCTION_ACCEL if inside else 0.0,
+                                     top=JUNCTION_TOP, horizon=min(
+                                         max(HORIZON, clear / place.speed), SLOW_HORIZON))
         self._bodies_now[key] = found
         return found
 

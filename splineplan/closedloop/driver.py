@@ -22,6 +22,7 @@ import numpy as np
 from splineplan.closedloop.bodies import BodyPath
 from splineplan.closedloop.control import Control
 from splineplan.closedloop.lanes import LaneChange
+from splineplan.closedloop.perception import STANDING_SPEED
 from splineplan.closedloop.replan import Replan, Replanning
 from splineplan.corridor import Corridor
 from splineplan.errors import ScenarioError, VehicleClassError
@@ -40,7 +41,6 @@ DRIVERS: tuple[str, ...] = get_args(DriverKind)
 #: A vehicle standing (slower than :data:`STANDING_SPEED` [m/s]) this long [s] is stuck:
 #: its metrics and the log say why (what its speed control waits for).
 STUCK_AFTER = 30.0
-STANDING_SPEED = 0.1
 
 log = logging.getLogger(__name__)
 

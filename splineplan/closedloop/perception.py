@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 from splineplan.closedloop._state import DriverState
-from splineplan.geometry import FloatArray
+from splineplan.geometry import FloatArray, wrap_angle
 from splineplan.metrics import footprints, rectangle_distances
 from splineplan.obstacles import Obstacles
 from splineplan.traffic import probe_points
@@ -39,6 +39,14 @@ _SWEEP_CLIP_TIME = 1.0
 _CONFLICT_TIMES: tuple[float, ...] = tuple(0.5 * k for k in range(7))
 #: Longitudinal slack [m] of that check.
 _CONFLICT_SLACK = 1.0
+#: A vehicle that has held the ego standing inside a junction this long [s], standing
+#: itself across the ego's way (heading more than :data:`BLOCKER_TURN` away), is planned
+#: round as a stopped one: each may wait for the other for good (SUMO's drivers wait at
+#: an internal junction with their front in the crossing lane).
+BLOCKED_AFTER = 5.0
+BLOCKER_TURN = math.radians(30.0)
+#: Slower than this [m/s] is standing (a vehicle, and the ego for the deadlock watch).
+STANDING_SPEED = 0.1
 
 
 class Perception(DriverState):
@@ -159,7 +167,10 @@ class Perception(DriverState):
         lo = self.station - ego.length - 5.0
         assert self.corridor is not None
         hi = min(self.station + sim.lookahead, self.corridor.length) + 5.0
-        veh = np.flatnonzero(o.stopped) if o.n_stopped else ()
+        veh = np.flatnonzero(o.stopped) if o.n_stopped else np.zeros(0, dtype=np.int64)
+        blockers = self._blockers()
+        if blockers:
+            veh = np.union1d(veh, blockers)
         keep_v = []
         for i in veh:
             fx, fy = o.front[i]
@@ -182,6 +193,26 @@ class Perception(DriverState):
             if where[2] and where[1] >= lo and where[0] <= hi:
                 keep_p.append(j)
         return np.asarray(keep_v, dtype=np.int64), np.asarray(keep_p, dtype=np.int64)
+
+    def _blockers(self) -> list[int]:
+        """The vehicles (indices in ``self.others``) that hold the ego standing inside a
+        junction for :data:`BLOCKED_AFTER` or longer and stand across its way themselves
+        (their heading more than :data:`BLOCKER_TURN` from the ego's): obstacles for
+        level 2 as stopped ones are."""
+        if (self.stand_since is None or self.time - self.stand_since < BLOCKED_AFTER
+                or not self.slowed_by or not self.last_lane.startswith(":")):
+            return []
+        o = self.others
+        found = []
+        for vid in self.slowed_by:
+            try:
+                j = o.ids.index(vid)
+            except ValueError:
+                continue
+            turn = abs(wrap_angle(float(o.head[j]) - float(self.pose[2])))
+            if o.speed[j] < STANDING_SPEED and turn > BLOCKER_TURN:
+                found.append(j)
+        return found
 
     def _on_route(self, poly: FloatArray) -> tuple[float, float, bool]:
         """Station range [m] of a polygon on the route, and whether it is within 1 m of the
