@@ -835,8 +835,8 @@ class Control(Perception):
         reach it within :data:`~.bodies.HORIZON`, and where its front has left the last
         junction and its body has too. Predicted for that horizon, or until the body has
         left the junction where that takes longer (at most :data:`~.bodies.SLOW_HORIZON`).
-        Kept for the step (planned vehicles of one run
-        share it: the run clears it each step)."""
+        Kept for the step (planned vehicles of one run share it: the run clears it each
+        step)."""
         key = (place, length)
         if key in self._bodies_now:
             return self._bodies_now[key]
@@ -862,7 +862,8 @@ class Control(Perception):
                 found = bodies_along(lanes, at, place.speed, length,
                                      accel=JUNCTION_ACCEL if inside else 0.0,
                                      top=JUNCTION_TOP, horizon=min(
-                                         max(HORIZON, clear / place.speed), SLOW_HORIZON))
+                                         max(HORIZON, clear / max(place.speed, MOVING)),
+                                         SLOW_HORIZON))
         self._bodies_now[key] = found
         return found
 
