@@ -701,7 +701,7 @@ def _lane_view(pose: tuple[float, float, float] = (0.0, 0.0, 0.0), lane: str = "
     return type("View", (), {
         "net": _city_network(),
         "sc": type("Sc", (), {"ego": ego})(), "pose": np.array(pose), "last_lane": lane,
-        "board": dict.fromkeys(board), "_lane_band": Control._lane_band})()
+        "board": dict.fromkeys(board), "_lane_band": Control._lane_band, "_bands": {}})()
 
 
 @functools.cache

@@ -740,7 +740,7 @@ def test_the_place_where_a_footprint_reaches_a_foes_lane_is_shapelys(
     xy = start + np.column_stack((np.cos(h) * s, np.sin(h) * s))
     ego = SimpleNamespace(length=4.5, width=1.8)
     me = SimpleNamespace(net=net, sc=SimpleNamespace(ego=ego), u=u, full_s=s, full_xy=xy,
-                         full_heading=np.full(len(s), h), _reach={})
+                         full_heading=np.full(len(s), h), _reach={}, _bands={})
     me._touching = lambda *a: Control._touching(me, *a)  # type: ignore[attr-defined]
     me._lane_band = lambda *a: Control._lane_band(me, *a)  # type: ignore[attr-defined]
     got = Control._lane_reach(me, ":B0_1_0", 1.8)  # type: ignore[arg-type]

@@ -124,6 +124,7 @@ class DriverState:
     _cand_was: list[int]
     _turn_key: tuple[Corridor, float] | None
     _reach: dict[tuple[str, float], list[float]]
+    _bands: dict[tuple[str, float], Any]  # see Control._lane_band
     _turn_window: FloatArray
 
     @property

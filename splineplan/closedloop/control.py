@@ -586,22 +586,26 @@ class Control(Perception):
                               tuple[FloatArray, FloatArray]] | None:
         """The band ``width`` [m] wide along lane ``lane_id`` as rectangles, one per piece of
         its centre line: the lane's points, the pieces' centres, headings and (length,
-        width); ``None`` for a lane the network lacks, or unknown width."""
-        if not lane_id or width <= 0.0:
-            return None
-        try:
-            lane = self.net.lane(lane_id)
-        except SplineplanError:
-            return None
-        pts = np.asarray(lane.shape, dtype=float)
-        d = np.diff(pts, axis=0)
-        seg = np.hypot(d[:, 0], d[:, 1])
-        keep = seg > 1e-6
-        if not keep.any():
-            return None
-        mid, d, seg = ((pts[:-1] + pts[1:]) / 2.0)[keep], d[keep], seg[keep]
-        return (pts, mid, np.arctan2(d[:, 1], d[:, 0]),
-                (seg + 0.1 * width, np.full(len(seg), width)))
+        width); ``None`` for a lane the network lacks, or unknown width. Kept per lane and
+        width."""
+        key = (lane_id, width)
+        if key in self._bands:
+            return self._bands[key]  # type: ignore[no-any-return]
+        band = None
+        if lane_id and width > 0.0:
+            try:
+                pts = np.asarray(self.net.lane(lane_id).shape, dtype=float)
+            except SplineplanError:
+                pts = np.zeros((0, 2))
+            d = np.diff(pts, axis=0)
+            seg = np.hypot(d[:, 0], d[:, 1])
+            keep = seg > 1e-6
+            if keep.any():
+                mid, d, seg = ((pts[:-1] + pts[1:]) / 2.0)[keep], d[keep], seg[keep]
+                band = (pts, mid, np.arctan2(d[:, 1], d[:, 0]),
+                        (seg + 0.1 * width, np.full(len(seg), width)))
+        self._bands[key] = band
+        return band
 
     def _body_speed(self, cap: float) -> float:
         """Speed cap [m/s] that keeps the ego's footprint, swinging round its path's

@@ -148,6 +148,7 @@ class Driver(Replanning, Control):
         self._sample_step = 0.0
         self._cand_was: list[int] = []
         self._reach: dict[tuple[str, float], list[float]] = {}  # see Control._lane_reach
+        self._bands: dict[tuple[str, float], Any] = {}  # see Control._lane_band
         self._turn_key: tuple[Corridor, float] | None = None
         self._turn_window: FloatArray = np.zeros(0)
         self._beside_was: tuple[np.ndarray, FloatArray] = (np.zeros(0, dtype=np.int64),
