@@ -638,7 +638,7 @@ def plot_speed_profile(
     NaN where it exceeds 1.5 ``s_max``), ``steering_limit`` (likewise; where the params
     have the car's steering) and ``s_max``.
     """
-    from splineplan.speed import nearby_curvature, towed_speed_limit
+    from splineplan.speed import allowed_speed, nearby_curvature, towed_speed_limit
     from splineplan.trajectory import CORNER_REACH
 
     mu, g, s_max = (_param(params, k) for k in ("mu", "g", "s_max"))
@@ -660,9 +660,8 @@ def plot_speed_profile(
         steer = np.where(steer <= top, steer, np.nan)
     # the plan takes a point's cornering speed from the sharpest curvature within
     # CORNER_REACH of it: the allowed area does so too, the line shows equation (1) itself
-    with np.errstate(divide="ignore"):
-        corner_near = np.sqrt(mu * g / nearby_curvature(s, kappa, CORNER_REACH))
-    allowed = np.fmin(np.fmin(corner_near, steer), s_max)
+    allowed = np.fmin(allowed_speed(nearby_curvature(s, kappa, CORNER_REACH), mu=mu, g=g,
+                                    s_max=s_max), steer)
     if ax is None:
         ax = Figure(figsize=(8.0, 3.5), layout="constrained").add_subplot()
     ax.fill_between(s, 0.0, np.nan_to_num(allowed, nan=s_max), color="#e3f2fd",
