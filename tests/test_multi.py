@@ -421,6 +421,18 @@ def test_planned_vehicle_and_a_bus_creeping_into_the_junction_do_not_wait_for_ea
                                         'departLane="1"')), 40.0)
 
 
+@pytest.mark.parametrize(("bus_pos", "car_pos"), [(78.0, 74.0), (78.0, 78.0), (82.0, 82.0)])
+def test_planned_vehicle_keeps_off_a_bus_rear_swinging_round_a_corner(
+        tmp_path: Path, bus_pos: float, car_pos: float) -> None:
+    """At the city's square corner E3 a planned car turns left from E2E3 into E3D3 as a
+    12 m bus turns right from D3E3 into E3E2. SUMO turns the bus to the direction from its
+    back to its front, so its rectangle reaches past its back out over E3D3, where the car
+    drives on. Before, the car predicted the body centred on that chord, 1.3 m short of
+    the rear, and the bus's rear hit it at these timings; now the body is SUMO's
+    rectangle: the car arrives, and their footprints keep half the safety margin."""
+    _p_keeps_off_bus(tmp_path, ("D3E3 E3E2", bus_pos, "max"), ("E2E3 E3D3", car_pos), 30.0)
+
+
 def _p_keeps_off_bus(tmp_path: Path, bus: tuple[str, float, str], car: tuple[str, float],
                      duration: float) -> None:
     """A 12 m bus 'b' (route edges, depart position [m], depart speed) and the planned car

@@ -1,10 +1,14 @@
 """Where the bodies of long vehicles will sweep through a junction (pure; no SUMO).
 
-SUMO moves a vehicle along its lanes' centre lines: its body is the rectangle from its back,
-its length behind the front along its lanes, to its front. Through a junction turn a bus's
-body cuts across the inside of the curve (a 12 m bus on a turn of 10 m radius lies 1.75 m
-inside its lane's centre line at its middle), over lanes whose drivers SUMO lets go on
-(their connections are no foes). A planned vehicle sees the bus and gives way: it predicts
+SUMO moves a vehicle's front along its lanes' centre lines and turns the vehicle to the
+direction from its back, its length behind the front along its lanes, to its front; its
+body is the rectangle of its length behind the front in that direction (as SUMO reports
+and draws it, and as the run's collision check counts it). Through a junction turn a bus's
+body cuts across the inside of the curve (a 12 m bus on a turn of 10 m radius lies about
+1.7 m inside its lane's centre line at its middle), over lanes whose drivers SUMO lets go
+on (their connections are no foes), and its rear reaches out past its back on the lanes
+(up to 3.5 m for a 12 m bus round a square corner), over the lane beside the one it turns
+from. A planned vehicle sees the bus and gives way: it predicts
 the body along the bus's lanes for a few seconds, a slow one until it has left the
 junction, at its speed, or speeding up where it is in the junction already
 (:func:`body_path`, :func:`bodies_along`), and finds where and when that body meets its own
@@ -95,8 +99,8 @@ def bodies_along(path: BodyPath, at: float, speed: float, length: float, *,
     """The body of a vehicle of ``length`` [m] whose front is at station ``at`` [m] of
     ``path``, driving on along it at ``speed`` [m/s] (speeding up at ``accel`` [m/s²] to
     ``top`` [m/s] where that is faster): times ``(k,)`` [s] from now, and its centres
-    ``(k, 2)`` [m] and headings ``(k,)`` [rad] then (the rectangle from its back to its
-    front, as SUMO draws it)."""
+    ``(k, 2)`` [m] and headings ``(k,)`` [rad] then (SUMO's rectangle: ``length`` behind
+    the front, headed from the back on its lanes to the front)."""
     t = np.arange(0.0, horizon + 1e-9, step)
     front = at + speed * t
     if accel > 0.0 and top > speed:
@@ -106,7 +110,8 @@ def bodies_along(path: BodyPath, at: float, speed: float, length: float, *,
     pb, _ = points_at(path, front - length)
     d = pf - pb
     head = np.arctan2(d[:, 1], d[:, 0])
-    return t, 0.5 * (pf + pb), head
+    u = np.column_stack((np.cos(head), np.sin(head)))
+    return t, pf - 0.5 * length * u, head
 
 
 def meeting(times: FloatArray, centres: FloatArray, heads: FloatArray,
