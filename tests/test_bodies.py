@@ -159,10 +159,10 @@ def test_a_bus_body_is_predicted_where_sumo_puts_it_round_a_corner() -> None:
     """A 12 m bus drives round the city's square corner E3 (from D3E3 to E3E2): at every
     step, the body predicted from its lane and position is SUMO's own rectangle (its
     length behind the front, at SUMO's angle: the one the run's collision check counts)
-    within 1 cm and 0.002 rad (1 cm at the bus's ends), and the body predicted 1 s on at its speed is SUMO's then within what its
-    change of speed moves it (the centre moves at most twice as far as the front round
-    the corner, where the body turns). Round the corner that rectangle reaches more than
-    2 m past the bus's back on its lanes."""
+    within 1 cm and 0.002 rad (1 cm at the bus's ends), and the body predicted 1 s on at
+    its speed is SUMO's then within what its change of speed moves it (the centre moves
+    at most twice as far as the front round the corner, where the body turns). Round the
+    corner that rectangle reaches more than 2 m past the bus's back on its lanes."""
     import libsumo
     from conftest import NETS
 
@@ -197,7 +197,7 @@ def test_a_bus_body_is_predicted_where_sumo_puts_it_round_a_corner() -> None:
             u = np.array([math.cos(h), math.sin(h)])
             centre = np.array([x, y]) - 0.5 * length * u
             speed = libsumo.vehicle.getSpeed("b")
-            t, c, hd = bodies_along(path, at, speed, length, horizon=1.0, step=1.0)
+            _, c, hd = bodies_along(path, at, speed, length, horizon=1.0, step=1.0)
             now_off.append((float(np.hypot(*(c[0] - centre))),
                             abs(math.remainder(float(hd[0]) - h, 2.0 * math.pi))))
             if step in predicted:

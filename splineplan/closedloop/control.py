@@ -432,12 +432,32 @@ class Control(Perception):
                 continue  # in the foe's way where it stands already: clear it
             if inside and self._foe_waits(foe):
                 continue  # SUMO's driver waits for a vehicle in the junction
-            c = self._stop_short(min(ego_in, self._lane_reach(foe.foe_lane, foe.foe_width)))
+            c = self._stop_short(self._before_junction(
+                min(ego_in, self._lane_reach(foe.foe_lane, foe.foe_width))))
             if c < cap:
                 cap = c
                 self._hold(f"giving way at a junction to vehicle '{foe.id}', as SUMO's "
                            "right of way says", foe.id)
         return cap
+
+    def _before_junction(self, ahead: float) -> float:
+        """Where [m ahead along the plan] the vehicle is to stand to give way instead of
+        ``ahead``: before the next junction, where ``ahead`` lies inside it and its
+        connection runs on one junction lane, if the vehicle can still stop before it at
+        its emergency braking. SUMO's drivers never stand inside such a junction, and one
+        that turns across it waits at its own internal junction for a vehicle standing
+        there, maybe with its front in that vehicle's way: both would wait for good."""
+        if self.last_lane.startswith(":"):
+            return ahead
+        front = self.station + self.sc.ego.length / 2.0
+        for j_in, _ in self._junction_spans:
+            if j_in < front:
+                continue  # passed, or in it
+            if (j_in not in self._one_lane_junctions or front + ahead <= j_in
+                    or self._cannot_stop(j_in - front)):
+                return ahead
+            return j_in - front
+        return ahead
 
     def _foe_waits(self, foe: JunctionFoe) -> bool:
         """Whether SUMO's driver of ``foe`` waits for the ego, which is in the junction
