@@ -442,18 +442,18 @@ class Control(Perception):
 
     def _before_junction(self, ahead: float) -> float:
         """Where [m ahead along the plan] the vehicle is to stand to give way instead of
-        ``ahead``: before the next junction, where ``ahead`` lies inside it and its
-        connection runs on one junction lane, if the vehicle can still stop before it at
-        its emergency braking. SUMO's drivers never stand inside such a junction, and one
-        that turns across it waits at its own internal junction for a vehicle standing
-        there, maybe with its front in that vehicle's way: both would wait for good."""
+        ``ahead``: before the junction ahead that holds that place, where its connection
+        runs on one junction lane, if the vehicle can still stop before it at its emergency
+        braking. SUMO's drivers never stand inside such a junction, and one that turns
+        across it waits at its own internal junction for a vehicle standing there, maybe
+        with its front in that vehicle's way: both would wait for good."""
         if self.last_lane.startswith(":"):
             return ahead
         front = self.station + self.sc.ego.length / 2.0
-        for j_in, _ in self._junction_spans:
-            if j_in < front:
-                continue  # passed, or in it
-            if (j_in not in self._one_lane_junctions or front + ahead <= j_in
+        for j_in, j_out in self._junction_spans:
+            if j_in < front or front + ahead >= j_out:
+                continue  # passed or in it, or the place lies beyond it
+            if (front + ahead <= j_in or j_in not in self._one_lane_junctions
                     or self._cannot_stop(j_in - front)):
                 return ahead
             return j_in - front
