@@ -433,22 +433,6 @@ def test_planned_vehicle_keeps_off_a_bus_rear_swinging_round_a_corner(
     _p_keeps_off_bus(tmp_path, ("D3E3 E3E2", bus_pos, "max"), ("E2E3 E3D3", car_pos), 30.0)
 
 
-@pytest.mark.parametrize(("q_pos", "p_pos"), [(55.0, 55.0), (58.0, 60.0), (60.0, 60.0)])
-def test_planned_vehicle_gives_way_before_a_one_lane_junction_not_inside_it(
-        tmp_path: Path, q_pos: float, p_pos: float) -> None:
-    """At the bridge junction E1 a planned car going straight on from E0E1 and SUMO's car
-    'q' turning left from D1E1 both go into E1E2, and the car must give way. Before, it
-    could not stop before the junction braking at b_max, so it stopped inside it, before
-    the conflict area; q then came to its internal junction with its front in the car's
-    way and waited there for the car in the junction, and both stood for good (at five
-    of six timings). Now it stops before the junction, braking harder where it must (SUMO's
-    drivers never stand inside a junction that a connection crosses on one lane): it
-    arrives, and their footprints keep half the safety margin."""
-    _p_arrives_clear(tmp_path, _routes(("q", "car", "D1E1 E1E2", q_pos, "max",
-                                        'departLane="1"'),
-                                       ("p", "car", "E0E1 E1E2", p_pos, "max")), 40.0)
-
-
 def _p_keeps_off_bus(tmp_path: Path, bus: tuple[str, float, str], car: tuple[str, float],
                      duration: float) -> None:
     """A 12 m bus 'b' (route edges, depart position [m], depart speed) and the planned car
