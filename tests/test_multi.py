@@ -20,7 +20,7 @@ import sumolib
 from conftest import NETS, ROOT
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
-from shapely.geometry import LineString, Polygon
+from shapely.geometry import LineString, Point, Polygon
 
 from splineplan import cli
 from splineplan.closedloop.control import SIDE_CLEAR, Control
@@ -800,7 +800,8 @@ def _standing_beside(gap: float, bend: float) -> tuple[bool, float, float]:
     others = Others(["q"], np.array([[2.25, y_other, 90.0, 4.5, 1.8, 0.0, 0.0]]), 0.1)
     view = type("View", (), {
         "u": 0.0, "path_s": u, "path_xy": np.column_stack((u, lat)), "path_heading": head,
-        "others": others, "sc": type("Sc", (), {"ego": ego})()})()
+        "others": others, "sc": type("Sc", (), {"ego": ego})(),
+        "_keeps_off": Control._keeps_off})()
     change = LaneChange(at=0.0, lane=1, width=3.2, lane_id="x_1", end=12.0)
     passes = Control._clears_standing(view, 0, change)  # type: ignore[arg-type]
 
@@ -827,6 +828,88 @@ def test_a_standing_car_beside_is_passed_where_the_plan_comes_no_nearer(
     assume(abs(nearest - need) > 0.01)  # not on the threshold's rounding
     assert passes == (nearest >= need)
     assert _standing_beside(gap, 0.0)[0]  # straight on: never nearer than it stands
+
+
+def _beside_in_way(gap: float, turn: float, along: float, bend: float
+                   ) -> tuple[int, int, list[float], list[float]]:
+    """A planned car at the origin heading east, its plan bending by ``bend`` [m] to the
+    left over 4 m, and another car to its left, ``along`` [m] ahead of it, turned
+    ``turn`` [rad] towards it (its right front corner nearest), ``gap`` [m] or so
+    between the two: the first path sample in the other's way
+    (``Control._first_in_way``), the sample at the car's front, and shapely's distances
+    from the car's body along the plan to the other's and from each path point to it."""
+    from splineplan.closedloop.control import PATH_MARGIN
+    from splineplan.traffic import Others
+
+    u = np.arange(0.0, 12.01, 0.25)
+    lat = bend * np.clip(u / 4.0, 0.0, 1.0) ** 2
+    head = np.arctan2(np.gradient(lat, u), 1.0)
+    h_o = -turn
+    # the other's centre: its right side 0.9 m + gap above the car's left side
+    cx = along
+    cy = 0.9 + gap + 0.9 * math.cos(h_o) + 2.25 * math.sin(turn)
+    front = (cx + 2.25 * math.cos(h_o), cy + 2.25 * math.sin(h_o))
+    angle = 90.0 - math.degrees(h_o)
+    others = Others(["q"], np.array([[front[0], front[1], angle, 4.5, 1.8, 0.0, 0.0]]), 0.1)
+    ego = type("Ego", (), {"length": 4.5, "width": 1.8})()
+    xy = np.column_stack((u, lat))
+    view = type("View", (), {
+        "_full": (u.tolist(), u.tolist(), lat.tolist(), head.tolist()), "full_xy": xy,
+        "full_heading": head, "others": others, "_sample_step": 0.25,
+        "sc": type("Sc", (), {"ego": ego})(), "_keeps_off": Control._keeps_off})()
+    reach = 0.9 + PATH_MARGIN
+    i_front = int(np.searchsorted(u, 2.25))
+    first = Control._first_in_way(view, 0, 0, (cx, cy, float(others.radius[0]) + reach),
+                                  reach, 0, i_front)  # type: ignore[arg-type]
+    body = _box(cx, cy, h_o)
+    bodies = [_box(float(x), float(y), float(h)).distance(body)
+              for x, y, h in zip(u[:i_front + 1], lat[:i_front + 1], head[:i_front + 1],
+                                 strict=True)]
+    points = [Point(float(x), float(y)).distance(body) for x, y in xy]
+    return first, i_front, bodies, points
+
+
+@given(st.floats(0.02, 0.4), st.floats(0.0, 0.2), st.floats(-3.0, 3.0),
+       st.floats(-0.4, 0.4))
+def test_a_car_beside_is_in_the_way_only_where_moving_on_comes_nearer(
+        gap: float, turn: float, along: float, bend: float) -> None:
+    """Two planned cars side by side, each in the reach of the other's path before its
+    front (one turned a little towards the other, to change lanes), waited for each other
+    for good on an empty road. A car beside the body holds the car back only where its
+    footprint, moved on along the plan to its front, comes within ``PATH_MARGIN`` of it
+    and more than ``BESIDE_GIVE`` nearer to it than it stands, or touches it; otherwise
+    it is in the way from the first path point ahead of the front in reach of it
+    (shapely's distances the judge)."""
+    from splineplan.closedloop.control import BESIDE_GIVE, PATH_MARGIN
+
+    first, i_front, bodies, points = _beside_in_way(gap, turn, along, bend)
+    reach = 0.9 + PATH_MARGIN
+    assume(all(abs(d - reach) > 1e-3 for d in points))
+    need = min(PATH_MARGIN, bodies[0] - BESIDE_GIVE)
+    nearest = min(bodies)
+    assume(abs(nearest - need) > 0.005 and bodies[0] > 1e-3 and not 0.0 < nearest < 1e-3)
+    beside = any(d <= reach for d in points[:i_front])
+    passes = nearest >= need and nearest > 0.0  # never touching
+    if beside and not passes:
+        assert first == next(k for k, d in enumerate(points) if d <= reach) < i_front
+    else:
+        ahead = [k for k, d in enumerate(points) if d <= reach and k >= i_front]
+        assert first == (ahead[0] if ahead else -1)
+
+
+def test_of_two_cars_side_by_side_the_one_ahead_goes_on() -> None:
+    """The two of a city run that stood side by side, 0.1 m apart, for good: the one
+    behind turned 0.12 rad towards the other's side, with its plan bending on that way,
+    the other one straight. The one ahead goes on; the one turned towards it waits."""
+    # the one ahead, seen from it (mirrored: the other to its left, 0.6 m behind, turned
+    # towards it), its plan straight on: never nearer
+    first, i_front, _, _ = _beside_in_way(0.1, 0.12, -0.6, 0.0)
+    assert first == -1 or first >= i_front
+    # the one behind, seen from it: the other to its left, 0.6 m ahead, turned towards it
+    # as seen from it, and its own plan bending on towards it
+    first, i_front, bodies, _ = _beside_in_way(0.1, 0.12, 0.6, 0.3)
+    assert bodies[0] > 0.05 and min(bodies) == 0.0  # it would run into the other's side
+    assert 0 <= first < i_front
 
 
 def test_a_crossing_planned_car_is_trusted_only_while_it_moves() -> None:

@@ -65,6 +65,12 @@ CHANGE_LOOK = 60.0
 #: to need no gap (:meth:`Control._clears_standing`).
 SIDE_CLEAR = 0.15
 SIDE_LOOK = 10.0
+#: A vehicle beside the body (in the path's reach before the front) is in the way only
+#: ahead of the front where the footprint, moved on along the path to there, keeps
+#: :data:`PATH_MARGIN` from it or comes no more than this [m] nearer to it than it stands
+#: (a rear corner sweeps a little towards a vehicle turned towards it as it passes), and
+#: never touches it (:meth:`Control._first_in_way`).
+BESIDE_GIVE = 0.05
 #: At a stop sign or an all-way stop the vehicle comes to a full stop with its front
 #: :data:`STOP_LINE` [m] before the line (at most :data:`STOP_REACH` more) and stands this
 #: long [s] (SUMO's ``jmStopSignWait`` at stop signs) before it goes, giving way as SUMO's
@@ -198,8 +204,9 @@ class Control(Perception):
 
         A vehicle is in the path where its footprint comes within the ego's half width
         plus :data:`PATH_MARGIN` of a path sample ahead of the ego (the trajectory and its
-        straight extension); the gap is to the first such sample. Only the samples within
-        the vehicle's bounding circle plus that reach can be in reach: a vehicle whose
+        straight extension), or beside the body where moving on brings it nearer
+        (:meth:`_first_in_way`); the gap is to the first such sample. Only the samples
+        within the vehicle's bounding circle plus that reach can be in reach: a vehicle whose
         circle misses the bounding box of the samples ahead is skipped, and the first
         sample in each other one's circle is found for all of them at once
         (:func:`~splineplan.kernels.first_in_circles`); the samples after it, by
@@ -213,7 +220,7 @@ class Control(Perception):
         o = self.others
         reach = ego.width / 2.0 + min(PATH_MARGIN, 0.5 * sc.roadmap.safety_margin)
         if o.n:
-            full_s, full_x, full_y, full_h = self._full
+            full_s, _, _, full_h = self._full
             i0 = bisect.bisect_left(self._pl[0], self.u)  # first sample ahead
             cand = []  # (first sample in the circle, vehicle, centre x, y, circle's radius)
             if i0 < len(full_s):
@@ -225,7 +232,9 @@ class Control(Perception):
                     cand.append((int(first[j]), j, float(o.cx[j]), float(o.cy[j]),
                                  float(orad[j])))
             cand.sort()
-            base = self.u + ego.length / 2.0 + sim.min_gap
+            front = self.u + ego.length / 2.0
+            i_front = bisect.bisect_left(full_s, front)  # the first sample at its front
+            base = front + sim.min_gap
             for lo, j, cx, cy, r in cand:
                 # the gap is at least up to the first sample in reach of the bounding
                 # circle, and a leader's speed is at least 0: nothing after can go lower
@@ -234,10 +243,7 @@ class Control(Perception):
                 if self.trusted and o.ids[j] in self.trusted and self._keeps_to_plan(
                         j, full_h[lo]):
                     continue  # crossing as it published: the plan yields to it
-                first = first_in_box_reach(
-                    lo, (cx, cy, r, self._sample_step),
-                    (float(o.cos[j]), float(o.sin[j]), 0.5 * float(o.length[j]),
-                     0.5 * float(o.width[j])), full_x, full_y, reach)
+                first = self._first_in_way(j, lo, (cx, cy, r), reach, i0, i_front)
                 if first < 0:
                     continue
                 gap = full_s[first] - base
@@ -286,6 +292,29 @@ class Control(Perception):
         cap = min(cap, self._body_speed(cap))
         cap = min(cap, self._only_below(self._change_speed, cap))
         return cap, int(math.isfinite(cap))
+
+    def _first_in_way(self, j: int, lo: int, circle: tuple[float, float, float],
+                      reach: float, i0: int, i_front: int) -> int:
+        """The first path sample from ``lo`` on within ``reach`` [m] of the body of
+        vehicle ``j`` of ``others`` (-1 if none), whose bounding circle (centre x, y and
+        radius plus ``reach`` [m]) it is in. One found before the ego's front (sample
+        ``i_front``; the first ahead of its centre is ``i0``) is beside its body: where the
+        footprint moved on to its front keeps :data:`PATH_MARGIN` from it or comes at most
+        :data:`BESIDE_GIVE` nearer to it than it stands (:meth:`_keeps_off`), only ahead
+        of the front is it in the way.
+        Two planned cars side by side, each in the other's reach, waited for each other
+        for good where the one ahead could drive on past the other."""
+        _, full_x, full_y, _ = self._full
+        o = self.others
+        around = (*circle, self._sample_step)
+        body = (float(o.cos[j]), float(o.sin[j]), 0.5 * float(o.length[j]),
+                0.5 * float(o.width[j]))
+        first = first_in_box_reach(lo, around, body, full_x, full_y, reach)
+        if 0 <= first < i_front and self._keeps_off(
+                j, self.full_xy[i0:i_front + 1], self.full_heading[i0:i_front + 1],
+                PATH_MARGIN, BESIDE_GIVE):
+            first = first_in_box_reach(i_front, around, body, full_x, full_y, reach)
+        return first
 
     def _only_below(self, rule: Callable[[], float], cap: float) -> float:
         """The speed cap [m/s] of ``rule``; what it says holds the vehicle back is kept
@@ -822,15 +851,23 @@ class Control(Perception):
         ps = np.asarray(self.path_s, dtype=float)
         stop = min(ch.end, ch.at + SIDE_LOOK)
         k = np.flatnonzero((ps >= self.u) & (ps <= stop))
-        if not len(k):
+        return self._keeps_off(j, np.asarray(self.path_xy, dtype=float)[k],
+                               np.asarray(self.path_heading, dtype=float)[k], SIDE_CLEAR)
+
+    def _keeps_off(self, j: int, xy: FloatArray, heading: FloatArray, room: float,
+                   give: float = 1e-3) -> bool:
+        """Whether the footprint at the path's points ``xy`` ``(n, 2)`` [m], headings
+        ``heading`` [rad], keeps ``room`` [m] from vehicle ``j`` of ``others`` where it
+        stands, or where the two are nearer already at the first of them (side by side),
+        never comes more than ``give`` [m] nearer to it than that (nor touches it)."""
+        n = len(heading)
+        if not n:
             return False
         o, ego = self.others, self.sc.ego
-        gap = box_gap(np.asarray(self.path_xy, dtype=float)[k],
-                      np.asarray(self.path_heading, dtype=float)[k], (ego.length, ego.width),
-                      np.repeat(o.centre[j:j + 1], len(k), axis=0),
-                      np.full(len(k), float(o.head[j])),
+        gap = box_gap(xy, heading, (ego.length, ego.width),
+                      np.repeat(o.centre[j:j + 1], n, axis=0), np.full(n, float(o.head[j])),
                       (float(o.length[j]), float(o.width[j])))
-        return bool(np.min(gap) >= min(SIDE_CLEAR, float(gap[0]) - 1e-3) and gap[0] > 0.0)
+        return bool(np.min(gap) >= min(room, float(gap[0]) - give) and np.min(gap) > 0.0)
 
     def _body_of(self, place: LanePlace, length: float
                  ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
