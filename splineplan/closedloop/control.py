@@ -65,11 +65,11 @@ CHANGE_LOOK = 60.0
 #: to need no gap (:meth:`Control._clears_standing`).
 SIDE_CLEAR = 0.15
 SIDE_LOOK = 10.0
-#: A vehicle beside the body (in the path's reach before the front) is in the way only
-#: ahead of the front where the footprint, moved on along the path to there, keeps
-#: :data:`PATH_MARGIN` from it or comes no more than this [m] nearer to it than it stands
-#: (a rear corner sweeps a little towards a vehicle turned towards it as it passes), and
-#: never touches it (:meth:`Control._first_in_way`).
+#: A standing vehicle beside the body (in the path's reach before the front) is in the
+#: way only ahead of the front where the footprint, moved on along the path to there,
+#: keeps :data:`PATH_MARGIN` from it or comes no more than this [m] nearer to it than it
+#: stands (a rear corner sweeps a little towards a vehicle turned towards it as it
+#: passes), and never touches it (:meth:`Control._first_in_way`).
 BESIDE_GIVE = 0.05
 #: At a stop sign or an all-way stop the vehicle comes to a full stop with its front
 #: :data:`STOP_LINE` [m] before the line (at most :data:`STOP_REACH` more) and stands this
@@ -298,7 +298,8 @@ class Control(Perception):
         """The first path sample from ``lo`` on within ``reach`` [m] of the body of
         vehicle ``j`` of ``others`` (-1 if none), whose bounding circle (centre x, y and
         radius plus ``reach`` [m]) it is in. One found before the ego's front (sample
-        ``i_front``; the first ahead of its centre is ``i0``) is beside its body: where the
+        ``i_front``; the first ahead of its centre is ``i0``) is beside its body: where it
+        stands (slower than :data:`STOPPED_FOE_SPEED`; one that moves may move in) and the
         footprint moved on to its front keeps :data:`PATH_MARGIN` from it or comes at most
         :data:`BESIDE_GIVE` nearer to it than it stands (:meth:`_keeps_off`), only ahead
         of the front is it in the way.
@@ -310,7 +311,7 @@ class Control(Perception):
         body = (float(o.cos[j]), float(o.sin[j]), 0.5 * float(o.length[j]),
                 0.5 * float(o.width[j]))
         first = first_in_box_reach(lo, around, body, full_x, full_y, reach)
-        if 0 <= first < i_front and self._keeps_off(
+        if 0 <= first < i_front and o.speed[j] < STOPPED_FOE_SPEED and self._keeps_off(
                 j, self.full_xy[i0:i_front + 1], self.full_heading[i0:i_front + 1],
                 PATH_MARGIN, BESIDE_GIVE):
             first = first_in_box_reach(i_front, around, body, full_x, full_y, reach)
