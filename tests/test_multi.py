@@ -830,12 +830,12 @@ def test_a_standing_car_beside_is_passed_where_the_plan_comes_no_nearer(
     assert _standing_beside(gap, 0.0)[0]  # straight on: never nearer than it stands
 
 
-def _beside_in_way(gap: float, turn: float, along: float, bend: float
+def _beside_in_way(gap: float, turn: float, along: float, bend: float, speed: float = 0.0
                    ) -> tuple[int, int, list[float], list[float]]:
     """A planned car at the origin heading east, its plan bending by ``bend`` [m] to the
     left over 4 m, and another car to its left, ``along`` [m] ahead of it, turned
     ``turn`` [rad] towards it (its right front corner nearest), ``gap`` [m] or so
-    between the two: the first path sample in the other's way
+    between the two, driving at ``speed`` [m/s]: the first path sample in the other's way
     (``Control._first_in_way``), the sample at the car's front, and shapely's distances
     from the car's body along the plan to the other's and from each path point to it."""
     from splineplan.closedloop.control import PATH_MARGIN
@@ -850,7 +850,8 @@ def _beside_in_way(gap: float, turn: float, along: float, bend: float
     cy = 0.9 + gap + 0.9 * math.cos(h_o) + 2.25 * math.sin(turn)
     front = (cx + 2.25 * math.cos(h_o), cy + 2.25 * math.sin(h_o))
     angle = 90.0 - math.degrees(h_o)
-    others = Others(["q"], np.array([[front[0], front[1], angle, 4.5, 1.8, 0.0, 0.0]]), 0.1)
+    others = Others(["q"], np.array([[front[0], front[1], angle, 4.5, 1.8, speed, 0.0]]),
+                    0.1)
     ego = type("Ego", (), {"length": 4.5, "width": 1.8})()
     xy = np.column_stack((u, lat))
     view = type("View", (), {
@@ -900,11 +901,15 @@ def test_a_car_beside_is_in_the_way_only_where_moving_on_comes_nearer(
 def test_of_two_cars_side_by_side_the_one_ahead_goes_on() -> None:
     """The two of a city run that stood side by side, 0.1 m apart, for good: the one
     behind turned 0.12 rad towards the other's side, with its plan bending on that way,
-    the other one straight. The one ahead goes on; the one turned towards it waits."""
+    the other one straight. The one ahead goes on; the one turned towards it waits. A car
+    beside that moves is in the way as before."""
     # the one ahead, seen from it (mirrored: the other to its left, 0.6 m behind, turned
     # towards it), its plan straight on: never nearer
     first, i_front, _, _ = _beside_in_way(0.1, 0.12, -0.6, 0.0)
     assert first == -1 or first >= i_front
+    # but not where the other moves: it may move in
+    first, i_front, _, _ = _beside_in_way(0.1, 0.12, -0.6, 0.0, speed=2.0)
+    assert 0 <= first < i_front
     # the one behind, seen from it: the other to its left, 0.6 m ahead, turned towards it
     # as seen from it, and its own plan bending on towards it
     first, i_front, bodies, _ = _beside_in_way(0.1, 0.12, 0.6, 0.3)
