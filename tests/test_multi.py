@@ -639,6 +639,27 @@ def test_a_car_giving_way_inside_a_junction_goes_once_the_foe_waits_for_it(
     assert arrived == {"p", "q"}
 
 
+@pytest.mark.parametrize(("q_pos", "p_pos"), [(60.0, 60.0), (55.0, 60.0), (65.0, 60.0)])
+def test_a_car_giving_way_to_a_left_turn_waits_before_the_junction(
+        tmp_path: Path, q_pos: float, p_pos: float) -> None:
+    """SUMO's car 'q' turns left from D1E1 into E1E2, where it waits for the oncoming
+    traffic at its internal junction inside E1; the planned car 'p' goes straight on from
+    E0E1 into the same lane and must give way to q. Where p stood inside the junction,
+    before the area it shares with q, q waited at its internal junction with its front in
+    p's way, for p to leave the junction's lanes, and p for q: both for good. p stands
+    before the junction instead, on its own lane, and both arrive."""
+    routes = _routes(("q", "car", "D1E1 E1E2", q_pos, "max", 'departLane="1"'),
+                     ("p", "car", "E0E1 E1E2", p_pos, "max"))
+    _, r = _p_among_sumo(tmp_path, "city.net.xml", routes, 40.0)
+    assert r.metrics["pairs"]["collision_pairs_planned"] == []
+    arrived = {t.get("id") for t in ET.parse(tmp_path / "out" / "tripinfo.xml").iter("tripinfo")}
+    assert arrived == {"p", "q"}
+    d = r.vehicles["p"].driven
+    stands = {str(lane) for lane, v in zip(d["lane"], d["speed"], strict=True)
+              if float(v) < 0.1}
+    assert not any(lane.startswith(":") for lane in stands), stands
+
+
 def _bridge_beside(tmp_path: Path, crawl: float) -> Any:
     """D1E1 onto the one-lane bridge: the planned car 'p' goes straight on, its footprint
     reaching over the line into the left lane as it comes to the junction, where SUMO's

@@ -115,6 +115,7 @@ class DriverState:
     _ref_heading: FloatArray
     _edge_starts: list[float]
     _junction_spans: list[tuple[float, float]]
+    _one_lane_junctions: set[float]  # their entry stations [m]
     _stop_lines: list[tuple[float, str, str]]  # (route station [m], edge, kind) of each
     stops_done: set[str]  # the edges at whose stop line the vehicle has stopped
     stop_since: float | None  # since when [s] it stands at a stop line

@@ -91,6 +91,11 @@ ALLWAY_REACH = 3.0
 #: speed control brakes up to this hard when something comes into the ego's path (and SUMO's
 #: vehicle type of the ego has it as its ``emergencyDecel``).
 EMERGENCY_FACTOR = 2.0
+#: A multiple of ``b_max`` at which a vehicle that gives way brakes, where it must, to
+#: stand before a junction that its connection crosses on one junction lane rather than
+#: inside it (:meth:`Control._before_junction`); below the emergency rate, at which SUMO
+#: reports emergency braking.
+HARD_BRAKING = 1.5
 #: How far [m/s] a plan's speed may lie below what braking at ``b_max`` reaches for the
 #: speed control to follow it at ``b_max`` (a new plan starts that little below where its
 #: curve turns the wheels sooner than the last plan's did); a plan that drops further
@@ -182,10 +187,11 @@ class Control(Perception):
         braking."""
         return self.v * self.v > 2.0 * EMERGENCY_FACTOR * self.sc.trajectory.b_max * dist
 
-    def _stand_within(self, dist: float) -> float:
-        """Speed cap [m/s] that stands within ``dist`` [m] ahead at the comfortable braking,
-        one step early (at once where it is that near already)."""
-        b = self.sc.trajectory.b_max
+    def _stand_within(self, dist: float, braking: float | None = None) -> float:
+        """Speed cap [m/s] that stands within ``dist`` [m] ahead at the comfortable braking
+        (or at ``braking`` [m/s^2]), one step early (at once where it is that near
+        already)."""
+        b = self.sc.trajectory.b_max if braking is None else braking
         return math.sqrt(max(2.0 * b * (dist - self.v * self.dt), 0.0))
 
     def _move(self, x: float | None = None, y: float | None = None, h: float | None = None
@@ -422,7 +428,11 @@ class Control(Perception):
         (:meth:`_lane_reach`; SUMO measures along the lanes' centre lines, and a turning
         car's front corner is in the foe's way earlier). Once it cannot stop before them,
         or its footprint is in the foe's way already (:meth:`_in_lane_way`), it goes on: a
-        car that stops inside a crossing blocks it. One that has crept within
+        car that stops inside a crossing blocks it. Where the foe is SUMO's and may wait
+        inside the junction, at an internal junction (:meth:`_waits_inside`), the ego
+        stands before the junction instead, where it still can (:meth:`_before_junction`;
+        not at an all-way stop, where the stop's own rule holds). One that has
+        crept within
         :data:`YIELD_STOP` of the area stays there while it must give way: it is in the
         area only within :data:`YIELD_EDGE` of it. A foe standing still outside the area
         is waiting (for a light or another vehicle) and is no conflict, except at an
@@ -462,12 +472,52 @@ class Control(Perception):
                 continue  # in the foe's way where it stands already: clear it
             if inside and self._foe_waits(foe):
                 continue  # SUMO's driver waits for a vehicle in the junction
-            c = self._stop_short(min(ego_in, self._lane_reach(foe.foe_lane, foe.foe_width)))
+            ahead = min(ego_in, self._lane_reach(foe.foe_lane, foe.foe_width))
+            c = self._stop_short(*(self._before_junction(ahead)
+                                   if kind != "w" and self._waits_inside(foe)
+                                   else (ahead, None)))
             if c < cap:
                 cap = c
                 self._hold(f"giving way at a junction to vehicle '{foe.id}', as SUMO's "
                            "right of way says", foe.id)
         return cap
+
+    def _waits_inside(self, foe: JunctionFoe) -> bool:
+        """Whether SUMO's driver of ``foe`` has an internal junction on its way through the
+        junction (its connection runs on more than one junction lane): it may wait there,
+        inside the junction, for a vehicle in the ego's way."""
+        if foe.id in self.board or not foe.foe_lane.startswith(":"):
+            return False
+        c = self.net.connection_via(foe.foe_lane)
+        return c is not None and len(c.via) > 1
+
+    def _before_junction(self, ahead: float) -> tuple[float, float | None]:
+        """Where [m ahead along the plan] the vehicle is to stand to give way instead of
+        ``ahead``, and the braking [m/s^2] to stand there (``None``: ``b_max``): before the
+        junction ahead that holds that place, where its connection runs on one junction
+        lane, if the vehicle can still stand :data:`YIELD_STOP` before it (or, crept
+        nearer, before it at all) braking at :data:`HARD_BRAKING` times ``b_max`` or less.
+        SUMO's drivers never stand inside such a junction, and one that turns across it
+        waits at its own internal junction for a vehicle standing there, maybe with its
+        front in that vehicle's way: both waited for good (a planned car going straight on
+        at the city's bridge junction and SUMO's car turning left into the same lane)."""
+        if self.last_lane.startswith(":"):
+            return ahead, None
+        front = self.station + self.sc.ego.length / 2.0
+        b = self.sc.trajectory.b_max
+        for j_in, j_out in self._junction_spans:
+            if j_in < front or front + ahead >= j_out:
+                continue  # passed or in it, or the place lies beyond it
+            if front + ahead <= j_in or j_in not in self._one_lane_junctions:
+                return ahead, None
+            # to stand YIELD_STOP before it; one that has crept nearer stands at once,
+            # before the junction
+            stand = j_in - front - YIELD_STOP
+            need = self.v * self.v / (2.0 * (stand if stand > 0.0 else max(j_in - front, 1e-6)))
+            if need > HARD_BRAKING * b:
+                return ahead, None
+            return j_in - front, max(need, b)
+        return ahead, None
 
     def _foe_waits(self, foe: JunctionFoe) -> bool:
         """Whether SUMO's driver of ``foe`` waits for the ego, which is in the junction
@@ -761,14 +811,14 @@ class Control(Perception):
             return math.inf
         return self._stop_short(ahead)
 
-    def _stop_short(self, ahead: float) -> float:
+    def _stop_short(self, ahead: float, braking: float | None = None) -> float:
         """Speed cap [m/s] that stops :data:`YIELD_STOP` short of a place ``ahead`` [m]
-        along the plan (comfortably, one step early; at once where it is that near
-        already), or ``inf`` where the ego cannot stop before it even at its emergency
-        braking: it goes on, to clear it."""
+        along the plan (comfortably, or at ``braking`` [m/s^2]; one step early; at once
+        where it is that near already), or ``inf`` where the ego cannot stop before it even
+        at its emergency braking: it goes on, to clear it."""
         if self._cannot_stop(max(ahead, 0.0)):
             return math.inf
-        return self._stand_within(self._before_change(ahead - YIELD_STOP))
+        return self._stand_within(self._before_change(ahead - YIELD_STOP), braking)
 
     def _before_change(self, stand: float) -> float:
         """Where [m ahead along the plan] the vehicle is to stand instead of ``stand``:

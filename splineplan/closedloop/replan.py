@@ -174,6 +174,12 @@ class Replanning(Perception):
         self._junction_spans = ([(a, b) for a, b in zip(ends[:-1], self._edge_starts[1:],
                                                          strict=True) if b > a]
                                 if len(ends) == len(self._edge_starts) else [])
+        # those whose connections run on one junction lane each (no internal junction)
+        self._one_lane_junctions = (
+            {a for a, b, e, f in zip(ends[:-1], self._edge_starts[1:], edges[:-1], edges[1:],
+                                      strict=True)
+             if b > a and all(len(c.via) <= 1 for c in self.net.connections_between(e, f))}
+            if len(ends) == len(self._edge_starts) == len(edges) else set())
         # the stop lines on the route (stop signs, all-way stops): the edge's end, the edge
         # (a stop is done once per edge) and the kind (network.stop_kind)
         kinds = ([self.net.stop_kind(e, f, ego.vclass) for e, f in itertools.pairwise(edges)]
