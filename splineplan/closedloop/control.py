@@ -308,9 +308,8 @@ class Control(Perception):
         stands (slower than :data:`STOPPED_FOE_SPEED`; one that moves may move in) and the
         footprint moved on to its front keeps :data:`PATH_MARGIN` from it or comes at most
         :data:`BESIDE_GIVE` nearer to it than it stands (:meth:`_keeps_off`), only ahead
-        of the front is it in the way.
-        Two planned cars side by side, each in the other's reach, waited for each other
-        for good where the one ahead could drive on past the other."""
+        of the front is it in the way. Two planned cars side by side, each in the other's
+        reach, waited for each other for good where the one ahead could drive on past."""
         _, full_x, full_y, _ = self._full
         o = self.others
         around = (*circle, self._sample_step)
@@ -431,8 +430,7 @@ class Control(Perception):
         car that stops inside a crossing blocks it. Where the foe is SUMO's and may wait
         inside the junction, at an internal junction (:meth:`_waits_inside`), the ego
         stands before the junction instead, where it still can (:meth:`_before_junction`;
-        not at an all-way stop, where the stop's own rule holds). One that has
-        crept within
+        not at an all-way stop, where the stop's own rule holds). One that has crept within
         :data:`YIELD_STOP` of the area stays there while it must give way: it is in the
         area only within :data:`YIELD_EDGE` of it. A foe standing still outside the area
         is waiting (for a light or another vehicle) and is no conflict, except at an
