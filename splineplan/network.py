@@ -134,6 +134,12 @@ class Connection:
     direction: str
     state: str = ""
 
+    @property
+    def internal_junction(self) -> bool:
+        """Whether the link has an internal junction: it runs on more than one internal
+        lane, and a vehicle may wait inside the junction between them."""
+        return len(self.via) > 1
+
 
 @dataclass(frozen=True, eq=False)
 class ClassGraph:

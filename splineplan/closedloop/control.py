@@ -487,7 +487,7 @@ class Control(Perception):
         if foe.id in self.board or not foe.foe_lane.startswith(":"):
             return False
         c = self.net.connection_via(foe.foe_lane)
-        return c is not None and len(c.via) > 1
+        return c is not None and c.internal_junction
 
     def _before_junction(self, ahead: float) -> tuple[float, float | None]:
         """Where [m ahead along the plan] the vehicle is to stand to give way instead of

@@ -178,7 +178,8 @@ class Replanning(Perception):
         self._one_lane_junctions = (
             {a for a, b, e, f in zip(ends[:-1], self._edge_starts[1:], edges[:-1], edges[1:],
                                       strict=True)
-             if b > a and all(len(c.via) <= 1 for c in self.net.connections_between(e, f))}
+             if b > a and not any(c.internal_junction
+                                  for c in self.net.connections_between(e, f))}
             if len(ends) == len(self._edge_starts) == len(edges) else set())
         # the stop lines on the route (stop signs, all-way stops): the edge's end, the edge
         # (a stop is done once per edge) and the kind (network.stop_kind)
